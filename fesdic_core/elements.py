@@ -1,8 +1,8 @@
 """Lagrange element families T3, T6, Q4, Q9 in gmsh node numbering.
 
-The FE approximation of the paper (Eq. 2 and Remark 1) writes a point of the surface as
-``X(xi) = sum_I L_I(xi) X_I``; the ``L_I`` are the Lagrange shape functions of this
-module, evaluated on the reference element:
+The FE approximation of the paper (Eq. 4, isoparametric: the same ``L_I`` describe the
+geometry ``X(xi) = sum_I L_I(xi) X_I`` and the shape correction ``S = L^T q``) uses the
+Lagrange shape functions of this module, evaluated on the reference element:
 
 * quadrangles on ``[-1, 1]^2``: corners counter-clockwise from ``(-1, -1)``, then the
   mid-edge nodes of edges 0-1, 1-2, 2-3, 3-0, then the centre (gmsh types 3 and 10);

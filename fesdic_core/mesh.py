@@ -1,8 +1,9 @@
 """Surface finite-element mesh in 3D: geometry map, area element, nodal normals.
 
-A point of the measured surface is ``X(xi) = sum_I L_I(xi) X_I`` (Eq. 2, Remark 1);
-the scalar shape unknown ``q[I]`` moves node I along its unit nominal normal ``n_I``
-(``X_I = X0_I + q[I] n_I``), which this module computes (:func:`node_normals`).
+Geometry and shape correction share the Lagrange shape functions ``L_I`` (isoparametric
+elements, Eq. 4): a point of the surface is ``X(xi) = sum_I L_I(xi) X_I``. The scalar
+shape unknown ``q[I]`` moves node I along its unit nominal normal ``n_I`` (Remark 1,
+the columns of the operator Z: ``X_I = X0_I + q[I] n_I``), computed by :func:`node_normals`.
 
 Blocks group the elements of one family; every function is vectorised over the
 elements of a block (the only Python loops run over the handful of blocks).
@@ -128,12 +129,12 @@ class SurfaceMesh:
 
 
 def map_points(nodes: np.ndarray, block: CellBlock, xi: np.ndarray) -> np.ndarray:
-    """Isoparametric map ``X(xi) = sum_I L_I(xi) X_I`` (Eq. 2).
+    """Isoparametric map ``X(xi) = sum_I L_I(xi) X_I`` (the interpolation of Eq. 4).
 
     nodes (n, 3), xi (m, 2) -> (ne, m, 3).
     """
     N = block.family.shape_functions(xi)                       # (m, nn)
-    return np.einsum("mi,eik->emk", N, np.asarray(nodes)[block.connectivity])
+    return np.einsum("mi,eik->emk", N, np.asarray(nodes)[block.connectivity])   # Eq. 4
 
 
 def tangents(nodes: np.ndarray, block: CellBlock, xi: np.ndarray) -> np.ndarray:
@@ -197,7 +198,7 @@ def _normalise(v: np.ndarray) -> np.ndarray:
 
 
 def node_normals(mesh: SurfaceMesh) -> np.ndarray:
-    """Unit nominal normals ``n_I`` at the nodes (Remark 1), (n, 3).
+    """Unit nominal normals ``n_I`` at the nodes (Remark 1: the operator Z), (n, 3).
 
     The area-weighted mean, over the elements sharing node I, of the element normal
     evaluated at node I's own parametric position. Nodes used by no element get zero.
