@@ -1,0 +1,223 @@
+"""Gray-level images ``f`` and ``g`` of Eq. 3: cubic B-spline interpolant, gradient, pyramids.
+
+Pixel coordinates ``(x, y)`` = (column, row), pixel centres at integers, so the image
+covers ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``. The interpolant is the cubic B-spline
+``f(x, y) = sum_kl c_kl b3(y - k) b3(x - l)`` through the pixel values, with the
+coefficients ``c`` computed once by :func:`scipy.ndimage.spline_filter` (mode "mirror":
+the image is continued symmetrically about its first and last pixel centres, and so are
+the coefficients). The gradient is the exact derivative of that same spline; the value and
+the gradient are evaluated together by a vectorised 4x4 tensor-product sum over the
+coefficients (``b3' (t) = b2(t + 1/2) - b2(t - 1/2)``), which :func:`map_coordinates`
+cannot do since it uses one spline order in both directions.
+
+``dynamic_range`` is ``max - min`` of the pixel values (of the data, not of the bit depth):
+it is the scale of the gray-level residual reported in percent.
+
+The multiscale images of Remark 3 are 2x2 block means (:meth:`Image.coarsen`); the matching
+camera is :meth:`fesdic_core.camera.Camera.scaled`.
+"""
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["Image", "ImageError", "read_image", "pyramid"]
+
+_BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
+
+
+class ImageError(ValueError):
+    """An image file or array that cannot be used (unreadable, non-finite, wrong shape)."""
+
+
+_PAD = 2                          # coefficient padding: covers the 4x4 support of x in [0, n - 1]
+_BLOCK = 1 << 16                  # points per block in evaluate_with_gradient (bounds memory)
+
+
+def _fold(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fold coordinates into ``[0, n - 1]`` by the spline's mirror symmetry; returns (x, d x_fold/d x)."""
+    if n == 1:
+        return np.zeros_like(x), np.zeros_like(x)
+    period = 2.0 * (n - 1)
+    xm = np.mod(x, period)
+    back = xm > n - 1
+    return np.where(back, period - xm, xm), np.where(back, -1.0, 1.0)
+
+
+def _cubic_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic B-spline weights (m, 4) of the nodes ``i-1 .. i+2`` at ``i + t``, and their derivatives."""
+    t = t[:, None]
+    s = 1.0 - t
+    t2 = t * t
+    w = np.hstack([s * s * s, 3.0 * t2 * t - 6.0 * t2 + 4.0, -3.0 * t2 * t + 3.0 * t2 + 3.0 * t + 1.0,
+                   t2 * t]) * (1.0 / 6.0)
+    dw = np.hstack([-s * s, 3.0 * t2 - 4.0 * t, -3.0 * t2 + 2.0 * t + 1.0, t2]) * 0.5
+    return w, dw
+
+
+def _xy(xy: np.ndarray) -> np.ndarray:
+    xy = np.asarray(xy, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"image coordinates must have shape (n, 2), got {xy.shape}")
+    return xy
+
+
+@dataclass(frozen=True, eq=False)
+class Image:
+    """A gray-level image and its cubic B-spline interpolant.
+
+    Attributes
+    ----------
+    values : (h, w) float64 pixel values
+    coefficients : (h, w) cubic B-spline coefficients of ``values`` (mirror boundary)
+    dynamic_range : ``max - min`` of ``values``
+    source : file name or label, used in messages
+    """
+
+    values: np.ndarray
+    coefficients: np.ndarray
+    dynamic_range: float
+    source: str = "array"
+
+    def __post_init__(self) -> None:
+        for field in ("values", "coefficients"):
+            a = np.asarray(getattr(self, field), dtype=np.float64)
+            if a.ndim != 2 or min(a.shape) < 1:
+                raise ImageError(f"image {self.source!r}: {field} must be a non-empty 2-D array, "
+                                 f"got shape {a.shape}")
+            a = a.copy() if a is getattr(self, field) and a.flags.writeable else a
+            a.flags.writeable = False
+            object.__setattr__(self, field, a)
+        if self.values.shape != self.coefficients.shape:
+            raise ImageError(f"image {self.source!r}: coefficients shape {self.coefficients.shape} "
+                             f"differs from values shape {self.values.shape}")
+        object.__setattr__(self, "dynamic_range", float(self.dynamic_range))
+        padded = np.pad(self.coefficients, _PAD, mode="reflect")   # numpy "reflect" = scipy "mirror"
+        object.__setattr__(self, "_padded", padded.ravel())
+        object.__setattr__(self, "_stencil", (np.arange(4)[:, None] * padded.shape[1]
+                                              + np.arange(4)).ravel())
+
+    @classmethod
+    def from_array(cls, a: np.ndarray, source: str = "array") -> "Image":
+        """Image of a 2-D array (h, w); raises :class:`ImageError` for NaN/inf or a wrong shape."""
+        values = np.array(a, dtype=np.float64)
+        if values.ndim != 2 or min(values.shape) < 1:
+            raise ImageError(f"image {source!r}: expected a non-empty 2-D array, got shape {values.shape}")
+        bad = np.count_nonzero(~np.isfinite(values))
+        if bad:
+            raise ImageError(f"image {source!r}: {bad} non-finite (NaN/inf) pixel values")
+        coefficients = ndimage.spline_filter(values, order=3, output=np.float64, mode="mirror")
+        return cls(values, coefficients, float(values.max() - values.min()), str(source))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(h, w) in px."""
+        return self.values.shape
+
+    def evaluate(self, xy: np.ndarray) -> np.ndarray:
+        """Interpolated gray levels at ``xy`` (n, 2) = (x, y); returns (n,)."""
+        xy = _xy(xy)
+        return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=3,
+                                       mode="mirror", prefilter=False)
+
+    def evaluate_with_gradient(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gray levels (n,) and exact spline gradient (n, 2) = [d/dx, d/dy] at ``xy`` (n, 2).
+
+        ``f = sum_ab c[i+a, j+b] wy_a wx_b`` over the 4x4 support, ``df/dx`` with ``wx'``,
+        ``df/dy`` with ``wy'`` (vectorised, in blocks of points to bound memory).
+        """
+        xy = _xy(xy)
+        h, w = self.values.shape
+        value = np.empty(len(xy))
+        grad = np.empty((len(xy), 2))
+        for start in range(0, len(xy), _BLOCK):
+            block = slice(start, start + _BLOCK)
+            finite = np.isfinite(xy[block]).all(axis=1)
+            pts = np.where(finite[:, None], xy[block], 0.0)        # NaN in, NaN out
+            x, sx = _fold(pts[:, 0], w)
+            y, sy = _fold(pts[:, 1], h)
+            i, j = np.floor(y), np.floor(x)
+            wy, dwy = _cubic_weights(y - i)
+            wx, dwx = _cubic_weights(x - j)
+            corner = (i.astype(np.int64) + _PAD - 1) * (w + 2 * _PAD) + j.astype(np.int64) + _PAD - 1
+            c = self._padded.take(corner[:, None] + self._stencil).reshape(-1, 4, 4)
+            cx = np.einsum("nab,nb->na", c, wx)
+            cdx = np.einsum("nab,nb->na", c, dwx)
+            value[block] = np.einsum("na,na->n", wy, cx)
+            grad[block, 0] = sx * np.einsum("na,na->n", wy, cdx)
+            grad[block, 1] = sy * np.einsum("na,na->n", dwy, cx)
+            if not finite.all():
+                value[block][~finite] = np.nan
+                grad[block][~finite] = np.nan
+        return value, grad
+
+    def gradient(self, xy: np.ndarray) -> np.ndarray:
+        """Exact gradient (n, 2) = [d/dx, d/dy] of the interpolant at ``xy`` (n, 2)."""
+        return self.evaluate_with_gradient(xy)[1]
+
+    def inside(self, xy: np.ndarray, margin: float = 1.5) -> np.ndarray:
+        """(n,) bool: finite points at least ``margin`` px inside the image border.
+
+        The border is the outer edge of the edge pixels (``-0.5`` and ``w - 0.5``).
+        """
+        xy = _xy(xy)
+        h, w = self.values.shape
+        lo = margin - 0.5
+        with np.errstate(invalid="ignore"):
+            return ((xy[:, 0] >= lo) & (xy[:, 0] <= w - 0.5 - margin)
+                    & (xy[:, 1] >= lo) & (xy[:, 1] <= h - 0.5 - margin))
+
+    def coarsen(self) -> "Image":
+        """2x2 block mean (an odd last row/column is dropped), the next scale of Remark 3."""
+        h, w = self.values.shape
+        if h < 2 or w < 2:
+            raise ImageError(f"image {self.source!r}: {w}x{h} px is too small to coarsen")
+        v = self.values[: h - h % 2, : w - w % 2]
+        coarse = v.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
+        return Image.from_array(coarse, f"{self.source} /2")
+
+
+def read_image(path: str | os.PathLike) -> Image:
+    """Read an 8- or 16-bit (or float) TIFF/PNG as gray levels (colour is converted to gray).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ImageError
+        If OpenCV cannot decode it, or it holds NaN/inf values.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"image file not found: {path}")
+    a = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    if a is None:
+        raise ImageError(f"cannot read image file {path!r} (not an image OpenCV can decode)")
+    a = a.astype(np.float64)
+    if a.ndim == 3:
+        if a.shape[2] == 1:
+            a = a[:, :, 0]
+        elif a.shape[2] in (3, 4):
+            a = a[:, :, :3] @ _BGR_TO_GRAY                        # OpenCV stores BGR(A)
+        else:
+            raise ImageError(f"image file {path!r}: unsupported {a.shape[2]} channels")
+    image = Image.from_array(a, source=path)
+    logger.debug("read %s: %dx%d px, range %.6g", path, a.shape[1], a.shape[0], image.dynamic_range)
+    return image
+
+
+def pyramid(image: Image, n_scales: int) -> list[Image]:
+    """Images of scales ``0 .. n_scales - 1`` (index = scale, 0 = finest), by 2x2 block means."""
+    if int(n_scales) != n_scales or n_scales < 1:
+        raise ValueError(f"n_scales must be a positive integer, got {n_scales!r}")
+    levels = [image]
+    for _ in range(int(n_scales) - 1):
+        levels.append(levels[-1].coarsen())
+    return levels

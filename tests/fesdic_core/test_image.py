@@ -1,0 +1,167 @@
+"""Tests of the gray-level images (fesdic_core.image): spline interpolant, gradient, pyramids, I/O."""
+import cv2
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from fesdic_core.camera import Camera
+from fesdic_core.image import Image, ImageError, pyramid, read_image
+
+
+def _random_image(shape=(37, 53), seed=0):
+    return Image.from_array(np.random.default_rng(seed).uniform(0.0, 255.0, size=shape), "random")
+
+
+def _random_points(image, n, seed, pad=0.0):
+    h, w = image.shape
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(-0.5 - pad, w - 0.5 + pad, n),
+                            rng.uniform(-0.5 - pad, h - 0.5 + pad, n)])
+
+
+def test_interpolant_reproduces_pixel_values():
+    image = _random_image()
+    h, w = image.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    xy = np.column_stack([xx.ravel(), yy.ravel()]).astype(float)
+    np.testing.assert_allclose(image.evaluate(xy), image.values.ravel(), rtol=0, atol=1e-9)
+    value, _ = image.evaluate_with_gradient(xy)
+    np.testing.assert_allclose(value, image.values.ravel(), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("shape", [(37, 53), (2, 9), (1, 6)])
+def test_value_and_gradient_are_the_same_spline_everywhere(shape):
+    """evaluate_with_gradient agrees with map_coordinates, also on and beyond the border."""
+    image = _random_image(shape, seed=1)
+    xy = _random_points(image, 4000, seed=2, pad=20.0)
+    value, grad = image.evaluate_with_gradient(xy)
+    np.testing.assert_allclose(value, image.evaluate(xy), rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(grad, image.gradient(xy))
+    h = 1e-5
+    scale = np.abs(grad).max() if np.abs(grad).max() > 0 else 1.0
+    for k in range(2):
+        e = np.zeros(2)
+        e[k] = h
+        fd = (image.evaluate(xy + e) - image.evaluate(xy - e)) / (2 * h)
+        assert np.abs(grad[:, k] - fd).max() / scale < 1e-6
+
+
+def test_gradient_of_smooth_image_matches_analytic_derivative():
+    h, w = 80, 100
+    yy, xx = np.mgrid[0:h, 0:w].astype(float)
+    kx, ky = 2 * np.pi / 23.0, 2 * np.pi / 31.0
+    image = Image.from_array(100.0 + 50.0 * np.sin(kx * xx) * np.cos(ky * yy))
+    xy = _random_points(image, 2000, seed=3)
+    xy = xy[image.inside(xy, margin=8.0)]                          # away from the mirror border
+    x, y = xy[:, 0], xy[:, 1]
+    value, grad = image.evaluate_with_gradient(xy)
+    exact = 100.0 + 50.0 * np.sin(kx * x) * np.cos(ky * y)
+    gx = 50.0 * kx * np.cos(kx * x) * np.cos(ky * y)
+    gy = -50.0 * ky * np.sin(kx * x) * np.sin(ky * y)
+    # cubic spline interpolation error O((k h)^4): about 1e-3 relative at 23 px per period
+    assert np.abs(value - exact).max() < 1e-3 * 50.0
+    assert np.abs(grad[:, 0] - gx).max() < 1e-2 * 50.0 * kx
+    assert np.abs(grad[:, 1] - gy).max() < 1e-2 * 50.0 * ky
+
+
+def test_nan_coordinates_give_nan():
+    image = _random_image()
+    value, grad = image.evaluate_with_gradient(np.array([[np.nan, 3.0], [4.0, 5.0]]))
+    assert np.isnan(value[0]) and np.isnan(grad[0]).all()
+    assert np.isfinite(value[1]) and np.isfinite(grad[1]).all()
+
+
+def test_inside():
+    image = _random_image((20, 30))
+    xy = np.array([[1.0, 1.0], [0.99, 5.0], [28.0, 18.0], [28.01, 5.0], [5.0, 18.01], [np.nan, 5.0]])
+    np.testing.assert_array_equal(image.inside(xy), [True, False, True, False, False, False])
+    assert image.inside(np.array([[-0.5, -0.5]]), margin=0.0).all()
+
+
+@pytest.mark.parametrize("shape", [(8, 10), (9, 11)])
+def test_coarsen_is_block_mean(shape):
+    a = np.random.default_rng(4).uniform(0, 1000, size=shape)
+    coarse = Image.from_array(a).coarsen()
+    h, w = shape[0] // 2, shape[1] // 2
+    assert coarse.shape == (h, w)
+    i, j = np.random.default_rng(5).integers(0, [h, w], size=(20, 2)).T
+    expected = (a[2 * i, 2 * j] + a[2 * i + 1, 2 * j] + a[2 * i, 2 * j + 1] + a[2 * i + 1, 2 * j + 1]) / 4
+    np.testing.assert_allclose(coarse.values[i, j], expected, rtol=1e-14)
+    assert coarse.dynamic_range == pytest.approx(coarse.values.max() - coarse.values.min())
+
+
+def test_pyramid_matches_the_scaled_camera():
+    """A point projecting to a 2x2 block centre samples the block mean on the coarse image."""
+    w, h = 64, 48
+    values = np.random.default_rng(6).uniform(0, 255, size=(h, w))
+    levels = pyramid(Image.from_array(values), 3)
+    assert [im.shape for im in levels] == [(48, 64), (24, 32), (12, 16)]
+    cam = Camera(np.array([[500.0, 2.0, 31.7], [0.0, 505.0, 24.2], [0.0, 0.0, 1.0]]), np.zeros(5),
+                 [0.05, -0.1, 0.02], [1.0, 2.0, 300.0], (w, h))
+    for scale in (1, 2):
+        coarse_cam = cam.scaled(scale)
+        assert coarse_cam.image_size == (levels[scale].shape[1], levels[scale].shape[0])
+        b = 2 ** scale
+        rng = np.random.default_rng(scale)
+        ij = rng.integers(1, [h // b - 1, w // b - 1], size=(15, 2))
+        centre = ij[:, ::-1] * b + (b - 1) / 2.0                 # fine (x, y) of the block centres
+        ray = np.column_stack([centre, np.ones(len(centre))]) @ np.linalg.inv(cam.K).T
+        X = (ray * 280.0 - cam.tvec) @ cam.R                      # back-projected world points
+        np.testing.assert_allclose(cam.project(X), centre, atol=1e-9)
+        x_coarse = coarse_cam.project(X)
+        np.testing.assert_allclose(x_coarse, ij[:, ::-1], atol=1e-9)
+        block_means = values.reshape(h // b, b, w // b, b).mean(axis=(1, 3))
+        np.testing.assert_allclose(levels[scale].evaluate(x_coarse), block_means[ij[:, 0], ij[:, 1]],
+                                   atol=1e-6)
+
+
+@pytest.mark.parametrize("ext,dtype,top", [(".png", np.uint8, 255), (".tif", np.uint8, 255),
+                                           (".png", np.uint16, 65535), (".tif", np.uint16, 65535)])
+def test_read_back_8_and_16_bit(tmp_path, ext, dtype, top):
+    a = np.random.default_rng(7).integers(0, top + 1, size=(21, 34)).astype(dtype)
+    path = tmp_path / f"img{ext}"
+    assert cv2.imwrite(str(path), a)
+    image = read_image(path)
+    np.testing.assert_array_equal(image.values, a.astype(float))
+    assert image.values.dtype == np.float64
+    assert image.dynamic_range == float(a.max()) - float(a.min())
+    assert image.source == str(path)
+    np.testing.assert_allclose(image.coefficients,
+                               ndimage.spline_filter(a.astype(float), order=3, mode="mirror"))
+
+
+def test_read_colour_as_gray(tmp_path):
+    bgr = np.random.default_rng(8).integers(0, 256, size=(10, 12, 3)).astype(np.uint8)
+    path = tmp_path / "colour.png"
+    cv2.imwrite(str(path), bgr)
+    gray_cv = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(float)   # rounded to uint8 by cv2
+    assert np.abs(read_image(path).values - gray_cv).max() <= 0.5 + 1e-9
+
+
+def test_missing_unreadable_and_nan_files(tmp_path):
+    missing = tmp_path / "nope.png"
+    with pytest.raises(FileNotFoundError, match="nope.png"):
+        read_image(missing)
+    junk = tmp_path / "junk.tif"
+    junk.write_bytes(b"this is not an image")
+    with pytest.raises(ImageError, match="junk.tif"):
+        read_image(junk)
+    a = np.ones((6, 7), dtype=np.float32)
+    a[1, 2] = np.nan
+    a[3, 3] = np.inf
+    path = tmp_path / "nan.tif"
+    assert cv2.imwrite(str(path), a)
+    with pytest.raises(ImageError, match=r"nan\.tif.*2 non-finite"):
+        read_image(path)
+
+
+def test_from_array_errors():
+    with pytest.raises(ImageError, match="bad.*1 non-finite"):
+        Image.from_array(np.array([[1.0, np.nan], [0.0, 2.0]]), source="bad")
+    with pytest.raises(ImageError, match="2-D"):
+        Image.from_array(np.zeros(5), source="flat")
+    assert issubclass(ImageError, ValueError)
+    with pytest.raises(ValueError, match="n_scales"):
+        pyramid(_random_image(), 0)
+    with pytest.raises(ImageError, match="too small"):
+        Image.from_array(np.zeros((1, 4))).coarsen()
