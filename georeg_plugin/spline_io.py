@@ -1,0 +1,343 @@
+"""Spline output: a plain JSON layout and IGES 5.3 (entity 128), both read back.
+
+The measured shape given "in terms of splines (thereby directly compatible with CAD
+environments)" (sec. 3.3) is a ``SplinePatch``: degrees, knot vectors, control points
+(mm) and weights.
+
+JSON layout (``format`` "georeg-spline", ``version`` 1)::
+
+    {"format": "georeg-spline", "version": 1,
+     "degrees": [p, q],
+     "knots": [[u_0, ..., u_{nu+p}], [v_0, ..., v_{nv+q}]],
+     "control_points": [[[x, y, z], ... nv ...], ... nu ...],   # mm, [nu][nv][3]
+     "weights": [[w, ... nv ...], ... nu ...] or null,          # null: B-spline
+     "scalar_field": [[f, ... nv ...], ... nu ...]}             # optional, per control point
+
+IGES: one Rational B-Spline Surface entity (type 128, form 0) in the fixed 80-column
+ASCII format of IGES 5.3: Start (S), Global (G), Directory Entry (D, two lines of ten
+8-column fields), Parameter Data (P: data in columns 1-64, the D pointer in 65-72) and
+Terminate (T) sections; column 73 holds the section letter and 74-80 the sequence number.
+Units are mm (unit flag 2), parameter delimiter ``,`` and record delimiter ``;``.
+The IGES first direction (``S``, index ``i`` of ``W(i, j)``, varying fastest) is ``u``.
+"""
+from __future__ import annotations
+
+import datetime
+import json
+import logging
+import os
+import pathlib
+import tempfile
+
+import numpy as np
+
+from .patch import SplinePatch
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["write_spline_json", "read_spline_json", "read_scalar_field",
+           "write_iges", "read_iges"]
+
+FORMAT = "georeg-spline"
+VERSION = 1
+#: IGES unit flag -> millimetres per unit (IGES 5.3, Global parameter 14)
+_IGES_UNITS_MM = {1: 25.4, 2: 1.0, 4: 304.8, 5: 1609344.0, 6: 1000.0, 7: 1.0e6,
+                  8: 0.0254, 9: 1.0e-3, 10: 10.0, 11: 2.54e-5}
+
+
+def _atomic_write_text(path: pathlib.Path, text: str, newline: str | None = None) -> None:
+    """Write ``text`` to a temporary file in the same folder, then ``os.replace`` it."""
+    path = pathlib.Path(path)
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="ascii" if newline else "utf-8",
+                       newline=newline) as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        pathlib.Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _weights_or_none(patch: SplinePatch) -> np.ndarray | None:
+    """The weights (nu, nv) of a NURBS patch, None for a B-spline patch."""
+    w = getattr(patch, "weights", None)
+    return None if w is None else np.asarray(w, dtype=float)
+
+
+# --------------------------------------------------------------------------- JSON
+def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
+                      scalar_field: np.ndarray | None = None) -> None:
+    """Write a patch (and optionally one value per control point) as JSON, atomically.
+
+    Parameters
+    ----------
+    path : output file.
+    patch : SplinePatch with control points (nu, nv, 3) in mm.
+    scalar_field : (nu, nv) or (nu * nv,), optional, e.g. the measured control values q_s.
+    """
+    cp = np.asarray(patch.control_points, dtype=float)
+    nu, nv = cp.shape[:2]
+    w = _weights_or_none(patch)
+    doc = {"format": FORMAT, "version": VERSION,
+           "degrees": [int(d) for d in patch.degrees],
+           "knots": [np.asarray(k, dtype=float).tolist() for k in patch.knots],
+           "control_points": cp.tolist(),
+           "weights": None if w is None else w.tolist()}
+    if scalar_field is not None:
+        f = np.asarray(scalar_field, dtype=float)
+        if f.size != nu * nv:
+            raise ValueError(f"scalar_field has {f.size} values, the patch has "
+                             f"{nu} x {nv} control points")
+        doc["scalar_field"] = f.reshape(nu, nv).tolist()
+    _atomic_write_text(pathlib.Path(path), json.dumps(doc, indent=1) + "\n")
+    logger.info("wrote spline %s (%d x %d control points)", path, nu, nv)
+
+
+def _load_json(path: str | os.PathLike) -> dict:
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"spline file {path} not found")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ValueError(f"{path}: field 'format' must be {FORMAT!r}")
+    if doc.get("version") != VERSION:
+        raise ValueError(f"{path}: field 'version' must be {VERSION}, "
+                         f"got {doc.get('version')!r}")
+    return doc
+
+
+def _field(doc: dict, path, name: str, shape_hint: str) -> np.ndarray:
+    if name not in doc:
+        raise ValueError(f"{path}: field {name!r} is missing")
+    try:
+        return np.asarray(doc[name], dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: field {name!r} must be {shape_hint} ({exc})") from exc
+
+
+def read_spline_json(path: str | os.PathLike) -> SplinePatch:
+    """Read a patch written by ``write_spline_json`` (layout in the module docstring)."""
+    doc = _load_json(path)
+    degrees = _field(doc, path, "degrees", "[p, q]")
+    if degrees.shape != (2,) or np.any(degrees != np.round(degrees)) or np.any(degrees < 1):
+        raise ValueError(f"{path}: field 'degrees' must be two integers >= 1, "
+                         f"got {doc['degrees']!r}")
+    knots = doc.get("knots")
+    if not isinstance(knots, list) or len(knots) != 2:
+        raise ValueError(f"{path}: field 'knots' must hold two knot vectors")
+    knots = tuple(_field({"knots": k}, path, "knots", "a list of numbers") for k in knots)
+    cp = _field(doc, path, "control_points", "nested [nu][nv][3]")
+    if cp.ndim != 3 or cp.shape[2] != 3:
+        raise ValueError(f"{path}: field 'control_points' must be nested [nu][nv][3], "
+                         f"got shape {cp.shape}")
+    weights = None
+    if doc.get("weights") is not None:
+        weights = _field(doc, path, "weights", "nested [nu][nv]")
+        if weights.shape != cp.shape[:2]:
+            raise ValueError(f"{path}: field 'weights' has shape {weights.shape}, "
+                             f"expected {cp.shape[:2]}")
+    try:
+        return _make_patch(degrees.astype(int), knots, cp, weights)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+def read_scalar_field(path: str | os.PathLike) -> np.ndarray | None:
+    """The optional ``scalar_field`` (nu, nv) of a spline JSON file, or None."""
+    doc = _load_json(path)
+    if doc.get("scalar_field") is None:
+        return None
+    return _field(doc, path, "scalar_field", "nested [nu][nv]")
+
+
+def _make_patch(degrees, knots, cp, weights) -> SplinePatch:
+    """A SplinePatch; ``weights=None`` is a B-spline patch."""
+    return SplinePatch(degrees=tuple(int(d) for d in degrees),
+                       knots=tuple(np.asarray(k, dtype=float) for k in knots),
+                       control_points=np.asarray(cp, dtype=float),
+                       weights=None if weights is None else np.asarray(weights, float))
+
+
+# --------------------------------------------------------------------------- IGES
+def _iges_real(x: float) -> str:
+    """An IGES real: shortest round-trip digits, always a decimal point, exponent E."""
+    s = repr(float(x))
+    if "e" in s:
+        mantissa, exponent = s.split("e")
+        if "." not in mantissa:
+            mantissa += ".0"
+        s = f"{mantissa}E{int(exponent)}"
+    return s
+
+
+def _hollerith(s: str) -> str:
+    return f"{len(s)}H{s}"
+
+
+def _section(records: list[str], letter: str) -> list[str]:
+    """Lines ``data(72) + letter + sequence(7)`` for the given 72-column records."""
+    return [f"{r:<72.72}{letter}{i:7d}" for i, r in enumerate(records, start=1)]
+
+
+def _pack(tokens: list[str], width: int) -> list[str]:
+    """Tokens (each ending with its delimiter) packed into lines of at most ``width``."""
+    lines, line = [], ""
+    for t in tokens:
+        if len(t) > width:
+            raise ValueError(f"IGES parameter {t!r} is longer than {width} columns")
+        if len(line) + len(t) > width:
+            lines.append(line)
+            line = ""
+        line += t
+    return lines + [line] if line else lines
+
+
+def write_iges(path: str | os.PathLike, patch: SplinePatch) -> None:
+    """Write the patch as an IGES 5.3 file with one entity 128 (mm), atomically."""
+    path = pathlib.Path(path)
+    cp = np.asarray(patch.control_points, dtype=float)
+    nu, nv = cp.shape[:2]
+    p, q = (int(d) for d in patch.degrees)
+    ku, kv = (np.asarray(k, dtype=float) for k in patch.knots)
+    w = _weights_or_none(patch)
+    polynomial = w is None
+    w = np.ones((nu, nv)) if w is None else w
+    # parameter data: K1, K2, M1, M2, PROP1..5, knots S, T, weights, points, U0 U1 V0 V1
+    values = ([128, nu - 1, nv - 1, p, q, 0, 0, int(polynomial), 0, 0]
+              + ku.tolist() + kv.tolist()
+              + w.ravel(order="F").tolist()                      # W(i, j), i fastest
+              + cp.transpose(1, 0, 2).reshape(-1).tolist()       # X, Y, Z (i, j), i fastest
+              + [ku[p], ku[-p - 1], kv[q], kv[-q - 1]])
+    strings = [str(v) if isinstance(v, int) else _iges_real(v) for v in values]
+    p_records = _pack([s + "," for s in strings[:-1]] + [strings[-1] + ";"], 64)
+    de = 1
+    p_lines = [f"{r:<64}{de:>8d}" for r in p_records]
+
+    now = datetime.datetime.now().strftime("%Y%m%d.%H%M%S")
+    extent = float(np.max(np.abs(cp))) if cp.size else 0.0
+    g_tokens = [_hollerith(","), _hollerith(";"), _hollerith("georeg spline"),
+                _hollerith(path.name[:40]), _hollerith("georeg_plugin"),
+                _hollerith("spline_io 1"), "32", "38", "6", "308", "15",
+                _hollerith("georeg spline"), "1.0", "2", _hollerith("MM"), "1", "0.01",
+                _hollerith(now), "1.0E-6", _iges_real(extent), _hollerith("georeg"),
+                _hollerith("georeg"), "11", "0", _hollerith(now)]
+    g_records = _pack([t + "," for t in g_tokens[:-1]] + [g_tokens[-1] + ";"], 72)
+    s_records = ["Rational B-spline surface (entity 128) written by georeg_plugin.",
+                 f"Degrees {p}, {q}; {nu} x {nv} control points; units mm."]
+    d_fields_1 = [128, 1, 0, 0, 0, 0, 0, 0]
+    d_fields_2 = [128, 0, 0, len(p_lines), 0]
+    d_records = ["".join(f"{v:8d}" for v in d_fields_1) + "00000000",
+                 "".join(f"{v:8d}" for v in d_fields_2) + " " * 16
+                 + f"{'SURFACE':>8}{0:8d}"]
+    sections = (_section(s_records, "S") + _section(g_records, "G")
+                + _section(d_records, "D") + _section(p_lines, "P"))
+    t_record = (f"S{len(s_records):7d}G{len(g_records):7d}"
+                f"D{len(d_records):7d}P{len(p_lines):7d}")
+    lines = sections + _section([t_record], "T")
+    _atomic_write_text(path, "\n".join(lines) + "\n", newline="\n")
+    logger.info("wrote IGES %s (%d x %d control points)", path, nu, nv)
+
+
+def _split_params(text: str, pdelim: str, rdelim: str) -> list[str]:
+    """Split free-format IGES parameters, honouring Hollerith strings ``nHxxx``."""
+    out, i, n = [], 0, len(text)
+    while i < n:
+        j = i
+        while j < n and text[j] == " ":
+            j += 1
+        k = j
+        while k < n and text[k].isdigit():
+            k += 1
+        if k > j and k < n and text[k] == "H":  # Hollerith string
+            length = int(text[j:k])
+            out.append(text[k + 1:k + 1 + length])
+            i = k + 1 + length
+            while i < n and text[i] not in (pdelim, rdelim):
+                i += 1
+        else:
+            i = j
+            while i < n and text[i] not in (pdelim, rdelim):
+                i += 1
+            out.append(text[j:i].strip())
+        if i >= n or text[i] == rdelim:
+            break
+        i += 1
+    return out
+
+
+def _iges_float(token: str, where: str) -> float:
+    try:
+        return float(token.replace("D", "E").replace("d", "e")) if token else 0.0
+    except ValueError as exc:
+        raise ValueError(f"{where}: {token!r} is not a number") from exc
+
+
+def read_iges(path: str | os.PathLike, entity: int = 0) -> SplinePatch:
+    """Read the ``entity``-th Rational B-Spline Surface (type 128) of an IGES file.
+
+    Coordinates are converted to mm from the file's unit flag and model space scale.
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"IGES file {path} not found")
+    lines = path.read_text(encoding="latin-1").splitlines()
+    by_section: dict[str, list[str]] = {}
+    for number, line in enumerate(lines, start=1):
+        if len(line.rstrip()) == 0:
+            continue
+        if len(line) < 73 or line[72] not in "SGDPTC":
+            raise ValueError(f"{path}: line {number} is not an 80-column IGES record")
+        by_section.setdefault(line[72], []).append(line)
+    if not by_section.get("G") or not by_section.get("D") or not by_section.get("P"):
+        raise ValueError(f"{path}: missing G, D or P section")
+    g_text = "".join(line[:72] for line in by_section["G"])
+    pdelim = g_text[2] if g_text.startswith("1H") else ","
+    rdelim_pos = 4 if g_text.startswith("1H") else 1
+    rdelim = g_text[rdelim_pos + 2] if g_text[rdelim_pos:rdelim_pos + 2] == "1H" else ";"
+    g = _split_params(g_text, pdelim, rdelim)
+    scale = _iges_float(g[12], f"{path}: G field 13 (model space scale)") if len(g) > 12 \
+        else 1.0
+    unit_flag = int(_iges_float(g[13], f"{path}: G field 14 (unit flag)")) if len(g) > 13 \
+        else 2
+    if unit_flag not in _IGES_UNITS_MM:
+        raise ValueError(f"{path}: G field 14 (unit flag) {unit_flag} is not supported")
+    to_mm = _IGES_UNITS_MM[unit_flag] / (scale or 1.0)
+
+    d_lines = by_section["D"]
+    entries = [(d_lines[k], d_lines[k + 1]) for k in range(0, len(d_lines) - 1, 2)]
+    surfaces = [(a, b) for a, b in entries if a[:8].strip() == "128"]
+    if len(surfaces) <= entity:
+        raise ValueError(f"{path}: has {len(surfaces)} entity 128 (rational B-spline "
+                         f"surface), entity index {entity} requested")
+    first, second = surfaces[entity]
+    if first[48:56].strip() not in ("", "0"):
+        raise ValueError(f"{path}: entity 128 has a transformation matrix "
+                         f"(D field 7 = {first[48:56].strip()}), not supported")
+    pointer, count = int(first[8:16]), int(second[24:32])
+    p_lines = by_section["P"]
+    text = "".join(line[:64] for line in p_lines[pointer - 1:pointer - 1 + count])
+    where = f"{path}: entity 128 parameter data"
+    tokens = _split_params(text, pdelim, rdelim)
+    if int(_iges_float(tokens[0], where)) != 128:
+        raise ValueError(f"{where}: starts with {tokens[0]!r}, not 128")
+    k1, k2, m1, m2 = (int(_iges_float(t, where)) for t in tokens[1:5])
+    nu, nv = k1 + 1, k2 + 1
+    values = np.array([_iges_float(t, where) for t in tokens[10:]])
+    sizes = [nu + m1 + 1, nv + m2 + 1, nu * nv, 3 * nu * nv]
+    if values.size < sum(sizes):
+        raise ValueError(f"{where}: {values.size} numbers, {sum(sizes)} expected for "
+                         f"K1={k1}, K2={k2}, M1={m1}, M2={m2}")
+    ku, kv, w, xyz = np.split(values[:sum(sizes)], np.cumsum(sizes)[:-1])
+    weights = w.reshape(nv, nu).T
+    cp = xyz.reshape(nv, nu, 3).transpose(1, 0, 2) * to_mm
+    polynomial = int(_iges_float(tokens[7], where)) == 1
+    try:
+        return _make_patch((m1, m2), (ku, kv), cp, None if polynomial else weights)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from exc
