@@ -1,0 +1,207 @@
+"""The operators ``C_s`` from the FE nodal space to the spline levels, Eqs. 16, 26-28.
+
+Node evaluation (Remark 6). Row ``I`` of ``C^T`` is the level's (rational) spline basis
+evaluated at the parametric coordinates ``xi_I`` of FE node ``I``:
+
+    C^T[I, J] = R_J(xi_I)                                   (Eq. 26 / 27, Remark 6)
+
+* B-spline patch, FE mesh made from the spline (``fe_mesh_from_spline``): the Lagrange
+  interpolant of ``R_J`` at the Q9 nodes is ``R_J`` itself (the spline space is contained
+  in the C0 Q9 space), so ``R^f = C_FE L`` holds exactly (Eq. 16), ``C_FE = D_LAG``.
+  The coarser levels: ``R^c = C_r R^f`` (Eq. 13) at the nodes gives
+  ``C_{s+1}^T = C_s^T C_r^T``, i.e. node evaluation equals the product form of Eq. 28
+  to round-off.
+* NURBS patch: ``C^T[I, J] = w_J N_J(xi_I) / W(xi_I)`` is ``D^W_LAG`` of Eq. 26 read at
+  the nodes, and ``R^f ~ D^W_LAG L`` is Eq. 27's approximation (exact at the nodes,
+  converging with refinement of the last level).  ``C_r`` of NURBS knot insertion
+  also satisfies ``R^c = C_r R^f`` exactly, so Eq. 28 still equals node evaluation.
+* Legacy mesh (not made from the spline): the ``xi_I`` come from point inversion of
+  the nodes on the nominal surface (``node_parameters``); the same formula applies.
+* Curved surface: the FE unknown of node ``I`` is a displacement along its normal
+  ``n_I`` (Remark 1); spline dof ``J`` moves its control point along its own normal
+  ``n_J``, hence ``C^T[I, J] = R_J(xi_I) (n_I . n_J)``. On a flat plate ``n_I . n_J = 1``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+import scipy.sparse as sps
+
+from .patch import SplinePatch, invert_points
+from .refine import refine_uniform
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["extraction_operator", "node_parameters", "MultilevelSpace",
+           "multilevel_space", "NodesOutsidePatchError"]
+
+
+class NodesOutsidePatchError(ValueError):
+    """FE nodes lie outside the spline patch (beyond the tolerance)."""
+
+
+def extraction_operator(patch: SplinePatch, uv: np.ndarray,
+                        node_normals: np.ndarray | None = None) -> sps.csr_matrix:
+    """``C`` (n_spline, n_fe) with ``C^T[I, J] = R_J(xi_I) [n_I . n_J]`` (Eqs. 26-27).
+
+    Parameters
+    ----------
+    patch : the spline level (dof ``J = i * nv + j``).
+    uv : (n_fe, 2) parametric coordinates of the FE nodes.
+    node_normals : (n_fe, 3) unit normals of the FE nodes, optional; with them each
+        entry is multiplied by ``n_I . n_J``, ``n_J = patch.control_normals()``.
+
+    Returns
+    -------
+    C : csr (n_spline, n_fe), explicit zeros dropped.
+    """
+    uv = np.asarray(uv, dtype=float)
+    if uv.ndim != 2 or uv.shape[1] != 2:
+        raise ValueError(f"uv must be (n_fe, 2), got {uv.shape}")
+    Ct = sps.coo_matrix(patch.basis(uv))  # Remark 6: R_J(xi_I), (n_fe, n_spline)
+    data = Ct.data
+    if node_normals is not None:
+        n_fe = np.asarray(node_normals, dtype=float)
+        if n_fe.shape != (uv.shape[0], 3):
+            raise ValueError(f"node_normals must be ({uv.shape[0]}, 3), got {n_fe.shape}")
+        n_spline = np.asarray(patch.control_normals(), dtype=float).reshape(-1, 3)
+        data = data * np.einsum("kd,kd->k", n_fe[Ct.row], n_spline[Ct.col])  # n_I . n_J
+    C = sps.csr_matrix((data, (Ct.col, Ct.row)), shape=(Ct.shape[1], Ct.shape[0]))
+    C.eliminate_zeros()
+    return C
+
+
+def node_parameters(patch: SplinePatch, nodes: np.ndarray, warn_mm: float = 1e-3,
+                    outside_mm: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Parametric coordinates of the nodes of a legacy mesh by point inversion.
+
+    Parameters
+    ----------
+    patch : the nominal surface.
+    nodes : (n, 3) node coordinates, mm.
+    warn_mm : distance to the surface above which a warning is logged.
+    outside_mm : tangential distance beyond the patch boundary above which
+        ``NodesOutsidePatchError`` is raised.
+
+    Returns
+    -------
+    uv : (n, 2) parameters of the closest surface points.
+    distance : (n,) distances node - surface, mm.
+    """
+    nodes = np.asarray(nodes, dtype=float)
+    if nodes.ndim != 2 or nodes.shape[1] != 3:
+        raise ValueError(f"nodes must be (n, 3), got {nodes.shape}")
+    uv, distance = invert_points(patch, nodes)
+    uv, distance = np.asarray(uv, dtype=float), np.asarray(distance, dtype=float)
+    # residual = normal part (off the surface) + tangential part (off the patch domain)
+    residual = nodes - patch.evaluate(uv)
+    normal = np.asarray(patch.normals(uv), dtype=float)
+    tangential = np.linalg.norm(
+        residual - np.einsum("kd,kd->k", residual, normal)[:, None] * normal, axis=1)
+    outside = np.flatnonzero(tangential > outside_mm)
+    if outside.size:
+        worst = int(outside[np.argmax(tangential[outside])])
+        raise NodesOutsidePatchError(
+            f"{outside.size} of {len(nodes)} FE nodes lie outside the spline patch by "
+            f"more than {outside_mm} mm; worst: node {worst} at {nodes[worst].tolist()}, "
+            f"{tangential[worst]:.3g} mm beyond the boundary")
+    far = np.flatnonzero(distance > warn_mm)
+    if far.size:
+        worst = int(far[np.argmax(distance[far])])
+        logger.warning("%d of %d FE nodes are more than %g mm from the spline surface "
+                       "(worst: node %d, %.3g mm)", far.size, len(nodes), warn_mm, worst,
+                       distance[worst])
+    return uv, distance
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MultilevelSpace:
+    """The spline levels of the regularization and their operators (Eq. 28).
+
+    Attributes
+    ----------
+    patches : tuple of SplinePatch, coarse -> fine (``patches[-1]`` is level 0).
+    operators : tuple of csr ``C_s`` (n_spline_s, n_fe), ``s = 0`` the FINEST level
+        (Eq. 28 numbering): ``operators[s]`` belongs to ``patches[-1 - s]``.
+    refinement : tuple of csr ``C_r`` with ``refinement[s]`` (n_spline_{s+1},
+        n_spline_s) mapping level ``s`` to the coarser level ``s + 1``:
+        ``R^{s+1} = refinement[s] R^s`` (Eq. 13), ``C_{s+1} = refinement[s] C_s``.
+    """
+
+    patches: tuple
+    operators: tuple
+    refinement: tuple = ()
+
+    def __post_init__(self) -> None:
+        ops = tuple(sps.csr_matrix(C) for C in self.operators)
+        if not ops:
+            raise ValueError("operators: at least one level is needed")
+        n_fe = {C.shape[1] for C in ops}
+        if len(n_fe) != 1:
+            raise ValueError(f"operators: all C_s must have the same number of FE "
+                             f"nodes (columns), got {sorted(n_fe)}")
+        if len(self.patches) != len(ops):
+            raise ValueError(f"patches: {len(self.patches)} patches for {len(ops)} "
+                             "operators")
+        refinement = tuple(sps.csr_matrix(Cr) for Cr in self.refinement)
+        if refinement:
+            if len(refinement) != len(ops) - 1:
+                raise ValueError(f"refinement: {len(ops) - 1} matrices C_r expected, "
+                                 f"got {len(refinement)}")
+            for s, Cr in enumerate(refinement):
+                if Cr.shape != (ops[s + 1].shape[0], ops[s].shape[0]):
+                    raise ValueError(f"refinement[{s}] has shape {Cr.shape}, expected "
+                                     f"{(ops[s + 1].shape[0], ops[s].shape[0])}")
+        object.__setattr__(self, "patches", tuple(self.patches))
+        object.__setattr__(self, "operators", ops)
+        object.__setattr__(self, "refinement", refinement)
+
+    @property
+    def n_levels(self) -> int:
+        """Number of spline levels."""
+        return len(self.operators)
+
+    @property
+    def n_fe(self) -> int:
+        """Number of FE nodal unknowns (columns of every ``C_s``)."""
+        return self.operators[0].shape[1]
+
+    def patch(self, level: int) -> SplinePatch:
+        """The spline patch of a level (``0`` = finest)."""
+        return self.patches[-1 - level]
+
+
+def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray,
+                     node_normals: np.ndarray | None = None,
+                     uv: np.ndarray | None = None) -> MultilevelSpace:
+    """Levels by dyadic refinement of ``coarse_patch``, operators by node evaluation.
+
+    Parameters
+    ----------
+    coarse_patch : the coarsest spline (level ``n_levels - 1``).
+    n_levels : number of levels; each finer one halves every knot span.
+    nodes : (n_fe, 3) FE node coordinates, mm (used for point inversion if ``uv`` is None).
+    node_normals : (n_fe, 3), optional (curved surfaces, see ``extraction_operator``).
+    uv : (n_fe, 2) parameters of the nodes if known (mesh made from the spline).
+
+    Returns
+    -------
+    MultilevelSpace. Without normals, ``C_s`` equals the product form of Eq. 28
+    (``C_{s+1} = C_r C_s``) to round-off, for B-splines and NURBS alike.
+    """
+    if int(n_levels) < 1:
+        raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    patches, refinements = [coarse_patch], []
+    for _ in range(int(n_levels) - 1):
+        fine, C_r = refine_uniform(patches[-1], 1)  # Eq. 13: R_c = C_r R_f
+        patches.append(fine)
+        refinements.append(sps.csr_matrix(C_r))
+    if uv is None:
+        uv, _ = node_parameters(patches[-1], nodes)
+    operators = [extraction_operator(p, uv, node_normals) for p in reversed(patches)]
+    logger.info("multilevel space: %d levels, spline dofs %s, %d FE nodes", n_levels,
+                [C.shape[0] for C in operators], np.asarray(uv).shape[0])
+    return MultilevelSpace(patches=tuple(patches), operators=tuple(operators),
+                           refinement=tuple(reversed(refinements)))
