@@ -1,0 +1,133 @@
+"""The pyxel-dic adapter: reduced basis, projection, and a spline-regularized FE-DIC.
+
+A synthetic speckle pair with a known smooth displacement (made here with
+scipy.ndimage.map_coordinates, plus Gaussian noise) is correlated by pyxel on its own
+Q4 and Q9 meshes, with and without the spline basis.
+"""
+import sys
+
+import numpy as np
+import pytest
+import scipy.ndimage as ndi
+import scipy.sparse as sps
+
+from adapters import pyxel as adapter
+from adapters.protocol import Adapter
+
+SIZE = 256  # px
+ROI = np.array([[40, 40], [216, 216]])  # (x, y) px corners of the meshed region
+NOISE = 3.0  # gray levels
+
+
+def true_displacement(x, y):
+    """A smooth field of a few px (x = column, y = row), quadratic in the image."""
+    xh, yh = (x - SIZE / 2) / (SIZE / 2), (y - SIZE / 2) / (SIZE / 2)
+    return 1.5 + 2.0 * xh ** 2 - 1.0 * xh * yh, -1.0 + 1.5 * yh ** 2 + 0.8 * xh
+
+
+@pytest.fixture(scope="module")
+def speckle_pair():
+    """(f, g) pyxel images: g(x + u(x)) = f(x), both with Gaussian noise."""
+    pyxel = pytest.importorskip("pyxel")
+    rng = np.random.default_rng(7)
+    texture = ndi.gaussian_filter(rng.standard_normal((SIZE + 40, SIZE + 40)), 1.5)[20:-20, 20:-20]
+    texture = 20 + 200 * (texture - texture.min()) / np.ptp(texture)
+    rows, cols = np.mgrid[0:SIZE, 0:SIZE].astype(float)
+    x, y = cols.copy(), rows.copy()
+    for _ in range(30):  # fixed point for the inverse map x = y_img - u(x)
+        ux, uy = true_displacement(x, y)
+        x, y = cols - ux, rows - uy
+    warped = ndi.map_coordinates(texture, [y, x], order=3, mode="nearest")
+    f, g = pyxel.Image("f"), pyxel.Image("g")
+    f.pix = texture + NOISE * rng.standard_normal(texture.shape)
+    g.pix = warped + NOISE * rng.standard_normal(texture.shape)
+    return f, g
+
+
+def roi_mesh(typel):
+    """pyxel's own structured mesh of the ROI (Q4: typel 3, Q9: typel 10), node spacing 8 px."""
+    pyxel = pytest.importorskip("pyxel")
+    m, cam = pyxel.MeshFromROI(ROI, [8, 8] if typel == 3 else [16, 16], typel=typel)
+    m.Connectivity()
+    return m, cam
+
+
+def nodal_truth(m):
+    """The true displacement as a pyxel dof vector (pyxel's mesh y axis points up)."""
+    ux, uy = true_displacement(m.n[:, 0], -m.n[:, 1])
+    return m.Nodes2DOF(np.c_[ux, -uy])
+
+
+def rms(a):
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def test_missing_pyxel_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyxel", None)  # makes "import pyxel" fail
+    with pytest.raises(ImportError, match=r"\.\[pyxel\]"):
+        adapter.import_pyxel()
+
+
+@pytest.mark.parametrize("typel", [3, 10])
+def test_basis_reproduces_the_node_coordinates(typel):
+    """B [x_J; y_J] = node coordinates: the affine spline field of its own control
+    points, placed by point inversion in pyxel's dof numbering (C^T = R_J(xi_I))."""
+    m, _ = roi_mesh(typel)
+    patch = adapter.spline_for_mesh(m, margin=3.0, degree=2, elements=(2, 3))
+    from georeg_plugin.operators import multilevel_space
+    nodes = np.c_[m.n, np.zeros(len(m.n))]
+    C = multilevel_space(patch, 2, nodes).operators[0]
+    B = adapter.pyxel_basis(m, C)
+    assert B.shape == (m.ndof, 2 * C.shape[0])
+    fine = multilevel_space(patch, 2, nodes).patch(0)
+    P = fine.control_points.reshape(-1, 3)
+    X = m.DOF2Nodes(B @ np.r_[P[:, 0], P[:, 1]])
+    np.testing.assert_allclose(X, m.n, atol=1e-9 * np.ptp(m.n))
+
+
+def test_projection_is_the_least_squares_one():
+    rng = np.random.default_rng(1)
+    B = sps.random(60, 8, density=0.3, random_state=2, format="csr") + sps.eye(60, 8)
+    a = rng.standard_normal(8)
+    np.testing.assert_allclose(adapter.project_on_basis(B, B @ a), B @ a, atol=1e-10)
+    U = rng.standard_normal(60)
+    P = adapter.project_on_basis(B, U)
+    np.testing.assert_allclose(B.T @ (U - P), 0.0, atol=1e-9)  # normal equations
+    with pytest.raises(ValueError, match="shape"):
+        adapter.project_on_basis(B, U[:-1])
+
+
+def test_spline_for_mesh_covers_the_mesh():
+    class Nodes:  # any object with node coordinates n
+        n = np.array([[1.0, -2.0], [5.0, 4.0], [3.0, 0.0]])
+    patch = adapter.spline_for_mesh(Nodes, margin=0.5, degree=3, elements=(2, 1))
+    corners = patch.evaluate(np.array([[0.0, 0.0], [1.0, 1.0], [0.25, 0.5]]))
+    np.testing.assert_allclose(corners[:, :2], [[0.5, -2.5], [5.5, 4.5], [1.75, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(corners[:, 2], 0.0)
+    with pytest.raises(ValueError, match="margin"):
+        adapter.spline_for_mesh(Nodes, margin=-1.0)
+
+
+@pytest.mark.parametrize("typel", [3, 10])
+def test_spline_regularization_beats_plain_pyxel_on_noisy_images(speckle_pair, typel):
+    f, g = speckle_pair
+    m, cam = roi_mesh(typel)
+    U_true = nodal_truth(m)
+    U_fe, std_fe = adapter.correlate_fe(f, g, m, cam, init_scales=(2, 1))
+    m, cam = roi_mesh(typel)
+    patch = adapter.spline_for_mesh(m, degree=2)
+    U_s, std_s, history = adapter.correlate_multilevel(f, g, m, cam, patch, n_levels=3)
+    err_fe, err_s = rms(U_fe - U_true), rms(U_s - U_true)
+    print(f"typel {typel}: rms error plain {err_fe:.4f} px, spline {err_s:.4f} px; "
+          f"residual std {std_fe:.3f} / {std_s:.3f} gl")
+    assert err_s < err_fe, (err_s, err_fe)
+    # coarse to fine: spline levels 2, 1, 0 on image scales 2, 1, 0, bases growing
+    assert [h.level for h in history] == [2, 1, 0]
+    assert [h.image_scale for h in history] == [2, 1, 0]
+    assert history[0].n_basis < history[1].n_basis < history[2].n_basis
+    # the true field lies in the spline space: the converged fit cannot do worse
+    host = adapter.PyxelAdapter(f, g, m, cam)
+    assert isinstance(host, Adapter) and host.n_dof == m.ndof
+    std_true = host.residual_std(U_true)
+    print(f"residual std at the true field {std_true:.4f} gl")
+    assert std_s <= std_true * (1.0 + 1e-3)
