@@ -225,17 +225,20 @@ class SplinePatch:
 
     def sample_parameters(self, per_span: int = 20,
                           max_per_direction: int = 400) -> tuple[np.ndarray, np.ndarray]:
-        """Parameters ``per_span`` apart in every knot span (spans included), u and v."""
+        """Parameters at the centres of ``per_span`` equal cells of every knot span.
+
+        All samples are strictly inside a span (never on a knot), u and v.
+        """
         out = []
         for b in self.breaks:
             k = max(2, min(per_span, max_per_direction // (len(b) - 1)))
-            s = (b[:-1, None] + (b[1:] - b[:-1])[:, None] * np.arange(k)[None, :] / k)
-            out.append(np.append(s.ravel(), b[-1]))
+            s = b[:-1, None] + (b[1:] - b[:-1])[:, None] * (np.arange(k) + 0.5) / k
+            out.append(s.ravel())
         return out[0], out[1]
 
 
-def _gauss_newton_step(S, Su, Sv, X) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gradient g (m, 2), Gauss-Newton matrix H (m, 2, 2) of 1/2 |S - X|^2."""
+def _gauss_newton(S, Su, Sv, X) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gradient g (m, 2), Gauss-Newton matrix H (m, 2, 2) and f = 1/2 |S - X|^2 (m,)."""
     r = S - X
     g = np.column_stack([np.sum(Su * r, 1), np.sum(Sv * r, 1)])
     H = np.empty((len(S), 2, 2))
@@ -245,29 +248,116 @@ def _gauss_newton_step(S, Su, Sv, X) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return g, H, 0.5 * np.sum(r * r, 1)
 
 
+def _active(uv, g, lo, hi) -> np.ndarray:
+    """Box constraints active at uv (on a bound, gradient pushing outwards), (m, 2)."""
+    return ((uv <= lo) & (g > 0)) | ((uv >= hi) & (g < 0))
+
+
 def _projected_step(uv, g, H, lo, hi) -> np.ndarray:
-    """Gauss-Newton step with the box constraints active where the gradient pushes out."""
+    """Gauss-Newton step, restricted to the free coordinates of the box."""
     det = H[:, 0, 0] * H[:, 1, 1] - H[:, 0, 1] ** 2
     det = np.where(np.abs(det) > 0, det, np.finfo(float).tiny)
     step = -np.column_stack([H[:, 1, 1] * g[:, 0] - H[:, 0, 1] * g[:, 1],
                              H[:, 0, 0] * g[:, 1] - H[:, 0, 1] * g[:, 0]]) / det[:, None]
-    active = ((uv <= lo) & (g > 0)) | ((uv >= hi) & (g < 0))
+    active = _active(uv, g, lo, hi)
     diag = np.maximum(np.stack([H[:, 0, 0], H[:, 1, 1]], 1), np.finfo(float).tiny)
     one = active[:, 0] ^ active[:, 1]
-    free_step = -g / diag
-    step[one] = np.where(active[one], 0.0, free_step[one])
+    step[one] = np.where(active[one], 0.0, (-g / diag)[one])
     step[active[:, 0] & active[:, 1]] = 0.0
     return step
 
 
+def _newton_in_boxes(patch, X, uv, lo, hi, step_tol, f_tol, max_iter) -> np.ndarray:
+    """Projected Gauss-Newton with backtracking, each point in its own box (m, 2)."""
+    uv = uv.copy()
+    todo = np.arange(len(X))
+    for _ in range(max_iter):
+        if todo.size == 0:
+            break
+        u, x, a, b = uv[todo], X[todo], lo[todo], hi[todo]
+        Su, Sv = patch.derivatives(u)
+        g, H, f = _gauss_newton(patch.evaluate(u), Su, Sv, x)
+        step = _projected_step(u, g, H, a, b)
+        t = np.ones(len(u))
+        new = u.copy()
+        pending = np.arange(len(u))
+        for _ in range(30):  # backtracking; f is known to round-off only
+            trial = np.clip(u[pending] + t[pending, None] * step[pending],
+                            a[pending], b[pending])
+            r = patch.evaluate(trial) - x[pending]
+            ok = 0.5 * np.sum(r * r, 1) <= f[pending] + f_tol * np.sqrt(2 * f[pending])
+            new[pending[ok]] = trial[ok]
+            pending = pending[~ok]
+            if pending.size == 0:
+                break
+            t[pending] *= 0.5
+        uv[todo] = new
+        todo = todo[np.any(np.abs(new - u) > step_tol, axis=1)]
+    return uv
+
+
+def _descend(patch, X, uv, tol, max_iter) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Span-by-span projected Gauss-Newton from ``uv``.
+
+    Returns the best parameters (m, 2), their f (m,), and whether the point ended on
+    the patch boundary with the gradient pushing outwards (m,) bool.
+    """
+    box_lo, box_hi = patch.bounds
+    breaks = patch.breaks
+    span = np.column_stack([np.clip(np.searchsorted(b, uv[:, d], side="right") - 1,
+                                    0, len(b) - 2) for d, b in enumerate(breaks)])
+    n_spans = np.array([len(b) - 1 for b in breaks])
+    step_tol = tol * (box_hi - box_lo)
+    # stay a hair below an interior upper knot: derivatives are then one-sided
+    inset = 16 * np.finfo(float).eps * np.max(np.abs(patch.bounds))
+    scale = np.max(np.abs(patch.control_points)) + np.max(np.abs(X))
+    f_tol = 64 * np.finfo(float).eps * scale
+    uv = uv.copy()
+    best = uv.copy()
+    best_f = np.full(len(X), np.inf)
+    outside = np.zeros(len(X), bool)
+    rows = np.arange(len(X))
+    for _ in range(4):  # passes over neighbouring spans
+        lo = np.column_stack([breaks[d][span[rows, d]] for d in range(2)])
+        top = np.column_stack([breaks[d][span[rows, d] + 1] for d in range(2)])
+        hi = np.where(span[rows] < n_spans - 1, top - inset, top)
+        res = _newton_in_boxes(patch, X[rows], np.clip(uv[rows], lo, hi), lo, hi,
+                               step_tol, f_tol, max_iter)
+        Su, Sv = patch.derivatives(res)
+        g, H, f = _gauss_newton(patch.evaluate(res), Su, Sv, X[rows])
+        better = f < best_f[rows]
+        best[rows[better]], best_f[rows[better]] = res[better], f[better]
+        # leave the span through an interior knot if that still decreases f noticeably
+        diag = np.maximum(np.stack([H[:, 0, 0], H[:, 1, 1]], 1), np.finfo(float).tiny)
+        push = np.abs(g) / np.sqrt(diag) > 1e-10 * scale
+        active = _active(res, g, lo, hi) & push
+        first, last = span[rows] == 0, span[rows] == n_spans - 1
+        down = active & (res <= lo) & ~first
+        up = active & (res >= hi) & ~last
+        outside[rows[better]] = np.any(active & ((res <= lo) & first | (res >= hi) & last),
+                                       axis=1)[better]
+        move = np.any(down | up, axis=1)
+        if not np.any(move):
+            break
+        span[rows] += up.astype(int) - down.astype(int)
+        uv[rows] = res
+        rows = rows[move]
+    return best, best_f, outside
+
+
 def invert_points(patch: SplinePatch, X, uv0=None, tol: float = 1e-12,
-                  max_iter: int = 60, per_span: int = 20) -> tuple[np.ndarray, np.ndarray]:
+                  max_iter: int = 60, per_span: int = 20,
+                  n_starts: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Closest parametric points of a patch to points in space.
 
-    Start from the nearest of a grid of sampled surface points (``per_span`` samples
-    per knot span and direction, nearest by a k-d tree) unless ``uv0`` is given, then
-    Gauss-Newton on ``1/2 |S(uv) - X|^2`` with projection on the parameter box and a
-    backtracking line search.
+    Start from the nearest of a grid of surface points sampled inside the knot spans
+    (``per_span`` per span and direction, nearest by a k-d tree) unless ``uv0`` is
+    given. Then projected Gauss-Newton on ``1/2 |S(uv) - X|^2`` with backtracking,
+    one knot span at a time (so that derivatives are never taken across a C0 knot);
+    a point whose minimum lies on an interior knot with the gradient pushing outwards
+    moves on to the neighbouring span. Points that end on the patch boundary with the
+    gradient pushing outwards (a closed patch's seam, or a point beyond the boundary)
+    are restarted from the next ``n_starts - 1`` nearest samples; the best is kept.
 
     Parameters
     ----------
@@ -284,45 +374,27 @@ def invert_points(patch: SplinePatch, X, uv0=None, tol: float = 1e-12,
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[1] != 3 or not np.all(np.isfinite(X)):
         raise ValueError(f"X: expected finite points of shape (m, 3), got {X.shape}")
-    lo, hi = patch.bounds
-    if uv0 is None:
+    box_lo, box_hi = patch.bounds
+    if uv0 is not None:
+        uv0 = np.asarray(uv0, dtype=float)
+        if uv0.shape != (len(X), 2):
+            raise ValueError(f"uv0: expected shape {(len(X), 2)}, got {uv0.shape}")
+        starts = np.clip(uv0, box_lo, box_hi)[:, None, :]
+    else:
         su, sv = patch.sample_parameters(per_span)
         U, V = np.meshgrid(su, sv, indexing="ij")
         grid = np.column_stack([U.ravel(), V.ravel()])
-        _, nearest = cKDTree(patch.evaluate(grid)).query(X)
-        uv = grid[nearest]
-    else:
-        uv = np.clip(np.asarray(uv0, dtype=float).reshape(len(X), 2), lo, hi)
-    step_tol = tol * (hi - lo)
-    # f is only known to round-off: accept steps that do not increase it beyond that
-    scale = np.max(np.abs(patch.control_points)) + np.max(np.abs(X))
-    f_tol = 64 * np.finfo(float).eps * scale
-    todo = np.arange(len(X))
-    for _ in range(max_iter):
-        if todo.size == 0:
+        k = max(1, min(int(n_starts), len(grid)))
+        _, nearest = cKDTree(patch.evaluate(grid)).query(X, k=k)
+        starts = grid[nearest.reshape(len(X), k)]
+    uv, f, outside = _descend(patch, X, starts[:, 0], tol, max_iter)
+    for s in range(1, starts.shape[1]):  # restarts, for the few suspicious points
+        rows = np.flatnonzero(outside)
+        if rows.size == 0:
             break
-        u, x = uv[todo], X[todo]
-        S = patch.evaluate(u)
-        Su, Sv = patch.derivatives(u)
-        g, H, f = _gauss_newton_step(S, Su, Sv, x)
-        step = _projected_step(u, g, H, lo, hi)
-        t = np.ones(len(u))
-        accepted = np.zeros(len(u), bool)
-        new = u.copy()
-        for _ in range(30):  # backtracking on the rows not yet accepted
-            rows = np.flatnonzero(~accepted)
-            if rows.size == 0:
-                break
-            trial = np.clip(u[rows] + t[rows, None] * step[rows], lo, hi)
-            r = patch.evaluate(trial) - x[rows]
-            ok = 0.5 * np.sum(r * r, 1) <= f[rows] + f_tol * np.sqrt(2 * f[rows])
-            new[rows[ok]] = trial[ok]
-            accepted[rows[ok]] = True
-            t[rows[~ok]] *= 0.5
-        moved = np.abs(new - u)
-        uv[todo] = new
-        todo = todo[np.any(moved > step_tol, axis=1)]
-    if todo.size:
-        logger.warning("invert_points: %d of %d points not converged", todo.size, len(X))
+        res, f_s, out_s = _descend(patch, X[rows], starts[rows, s], tol, max_iter)
+        better = f_s < f[rows]
+        uv[rows[better]], f[rows[better]] = res[better], f_s[better]
+        outside[rows] = np.where(better, out_s, True)  # not better: try the next start
     distance = np.linalg.norm(patch.evaluate(uv) - X, axis=1)
     return uv, distance
