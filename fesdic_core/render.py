@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Callable, Sequence
@@ -33,7 +35,7 @@ GradientFunction = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarr
 GRAY_RANGE = (30.0, 220.0)  # gray levels of the dots and of the paint
 TEXELS_PER_SPECKLE = 6  # texel size = speckle_mm / 6
 MAX_TEXELS = 100_000_000
-CHUNK_RAYS = 1 << 20  # rays cast at once (bounds the memory to ~200 MB)
+CHUNK_RAYS = 1 << 19  # rays per chunk (~130 MB of work arrays; one chunk per thread)
 
 
 def _flat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -261,29 +263,37 @@ def intersect_surface(
     return lam
 
 
+def _render_rows(specimen, camera, texture, rows, offsets, background) -> np.ndarray:
+    """Gray levels (len(rows), w) of some image rows: s x s rays per pixel, averaged."""
+    w, s = int(camera.image_size[0]), len(offsets)
+    v = (rows[:, None] + offsets[None, :])[:, :, None, None]  # (nr, s, 1, 1)
+    u = (np.arange(w)[:, None] + offsets[None, :])[None, None, :, :]  # (1, 1, w, s)
+    u, v = np.broadcast_arrays(u, v)
+    centre, directions = pixel_rays(camera, np.column_stack([u.ravel(), v.ravel()]))
+    lam = intersect_surface(specimen, centre, directions)
+    hit = np.isfinite(lam) & (lam > 0)
+    x = np.where(hit, centre[0] + lam * directions[:, 0], np.inf)
+    y = np.where(hit, centre[1] + lam * directions[:, 1], np.inf)
+    material = hit & specimen.contains(x, y)
+    gray = np.full(lam.shape, float(background))
+    gray[material] = texture(x[material], y[material])
+    return gray.reshape(len(rows), s, w, s).mean(axis=(1, 3))  # pixel integration
+
+
 def _render_view(specimen, camera, texture, supersample, background, progress) -> np.ndarray:
-    """Supersampled gray levels (h, w) of one camera, rows cast in chunks."""
+    """Supersampled gray levels (h, w) of one camera, row chunks cast on a thread pool."""
     w, h = (int(v) for v in camera.image_size)
     s = int(supersample)
     offsets = (np.arange(s) + 0.5) / s - 0.5  # sample positions inside [-0.5, 0.5]
     rows_per_chunk = max(1, CHUNK_RAYS // (w * s * s))
+    chunks = [np.arange(r0, min(r0 + rows_per_chunk, h)) for r0 in range(0, h, rows_per_chunk)]
     image = np.empty((h, w))
-    starts = range(0, h, rows_per_chunk)
     name = getattr(camera, "name", "camera")
-    for r0 in tqdm(starts, desc=f"render {name}", unit="chunk", disable=not progress):
-        rows = np.arange(r0, min(r0 + rows_per_chunk, h))
-        v = (rows[:, None] + offsets[None, :])[:, :, None, None]  # (nr, s, 1, 1)
-        u = (np.arange(w)[:, None] + offsets[None, :])[None, None, :, :]  # (1, 1, w, s)
-        u, v = np.broadcast_arrays(u, v)
-        centre, directions = pixel_rays(camera, np.column_stack([u.ravel(), v.ravel()]))
-        lam = intersect_surface(specimen, centre, directions)
-        hit = np.isfinite(lam) & (lam > 0)
-        x = np.where(hit, centre[0] + lam * directions[:, 0], np.inf)
-        y = np.where(hit, centre[1] + lam * directions[:, 1], np.inf)
-        material = hit & specimen.contains(x, y)
-        gray = np.full(lam.shape, float(background))
-        gray[material] = texture(x[material], y[material])
-        image[rows] = gray.reshape(len(rows), s, w, s).mean(axis=(1, 3))  # pixel integration
+    with ThreadPoolExecutor(max_workers=min(os.cpu_count() or 1, len(chunks))) as pool:
+        work = pool.map(lambda rows: _render_rows(specimen, camera, texture, rows, offsets, background), chunks)
+        for rows, gray in zip(chunks, tqdm(work, total=len(chunks), desc=f"render {name}", unit="chunk",
+                                           disable=not progress)):
+            image[rows] = gray
     return image
 
 
