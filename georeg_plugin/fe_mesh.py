@@ -11,6 +11,10 @@ points of one global parametric grid of ``(2 n_u + 1) x (2 n_v + 1)`` values (Q9
 ``(n_u + 1) x (n_v + 1)`` (Q4), numbered ``a * n_cols + b`` (``a`` along ``u``).
 The local axes of every element are ``(xi, eta) = (u, v)``, so the FE normal
 ``x_xi x x_eta`` has the direction of the spline normal ``S_u x S_v``.
+
+A closed patch (``plate_with_hole``: ``u = 0`` and ``u = 1`` are the same line) gives
+coincident but distinct nodes along that seam, as the spline has distinct dofs there;
+gluing them needs the matching gluing of the spline dofs of every level.
 """
 from __future__ import annotations
 

@@ -143,10 +143,11 @@ def _legacy_plate_nodes(n_target, rng):
     """Nodes of an unstructured T3 mesh of the plate with hole, written/read by meshio."""
     h = np.sqrt((L * W - np.pi * R ** 2) / n_target)
     nx, ny = int(L / h), int(W / h)
-    box = np.r_[np.column_stack([np.linspace(-L / 2, L / 2, nx + 1), np.full(nx + 1, -W / 2)]),
-                np.column_stack([np.linspace(-L / 2, L / 2, nx + 1), np.full(nx + 1, W / 2)]),
-                np.column_stack([np.full(ny - 1, -L / 2), np.linspace(-W / 2, W / 2, ny + 1)[1:-1]]),
-                np.column_stack([np.full(ny - 1, L / 2), np.linspace(-W / 2, W / 2, ny + 1)[1:-1]])]
+    x, y = np.linspace(-L / 2, L / 2, nx + 1), np.linspace(-W / 2, W / 2, ny + 1)[1:-1]
+    box = np.r_[np.column_stack([x, np.full(x.size, -W / 2)]),
+                np.column_stack([x, np.full(x.size, W / 2)]),
+                np.column_stack([np.full(y.size, -L / 2), y]),
+                np.column_stack([np.full(y.size, L / 2), y])]
     n_hole = int(2 * np.pi * R / h)
     t = np.linspace(0, 2 * np.pi, n_hole, endpoint=False)
     hole = R * np.column_stack([np.cos(t), np.sin(t)])
