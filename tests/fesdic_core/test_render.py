@@ -1,5 +1,7 @@
 """Tests of the synthetic stereo renderer (ray casting, boundary, noise, Eq. 3)."""
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -60,6 +62,12 @@ def test_ray_hits_surface_and_projects_back_on_its_pixel(skew):
         assert np.max(np.abs(uv.reshape(-1, 2) - px)) < 1e-6
 
 
+def test_ray_parallel_to_the_plate_misses():
+    lam = intersect_surface(_twisted(), np.array([0.0, 0.0, 5.0]), np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]))
+    assert np.isnan(lam[0])
+    assert abs(lam[1] - (5.0 - 0.25)) < 1e-12  # straight down onto the 0.25 mm central bump
+
+
 def test_true_surface_points_and_normal_offsets_land_on_the_surface():
     specimen = _twisted()
     xy = np.random.default_rng(0).uniform([-24, -12], [24, 12], size=(200, 2))
@@ -98,7 +106,7 @@ def test_boundary_of_plate_and_hole_land_on_the_projected_true_boundary():
     s = 3
     inside, outside = 150.0, 10.0
     specimen = twisted_plate(100.0, 24.0, corner_mm=0.6, waviness_mm=0.25, view_length_mm=48.0, hole_radius_mm=7.0)
-    specimen = Specimen(**{**specimen.__dict__, "texture": _uniform(inside)})
+    specimen = replace(specimen, texture=_uniform(inside))
     cam = demo_cameras((320, 240), distance_mm=300.0, field_mm=48.0, dist=DIST)[1]
     (image,) = render_stereo(specimen, [cam], supersample=s, background=outside, bit_depth=None)
     coverage = (image - outside) / (inside - outside)
