@@ -38,7 +38,7 @@ class ImageError(ValueError):
 
 
 _PAD = 2                          # coefficient padding: covers the 4x4 support of x in [0, n - 1]
-_BLOCK = 1 << 16                  # points per block in evaluate_with_gradient (bounds memory)
+_BLOCK = 1 << 14                  # points per block in evaluate_with_gradient (bounds memory)
 
 
 def _fold(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,8 +92,9 @@ class Image:
             if a.ndim != 2 or min(a.shape) < 1:
                 raise ImageError(f"image {self.source!r}: {field} must be a non-empty 2-D array, "
                                  f"got shape {a.shape}")
-            a = a.copy() if a is getattr(self, field) and a.flags.writeable else a
-            a.flags.writeable = False
+            if a.flags.writeable:                                  # never freeze a caller's array
+                a = a.copy()
+                a.flags.writeable = False
             object.__setattr__(self, field, a)
         if self.values.shape != self.coefficients.shape:
             raise ImageError(f"image {self.source!r}: coefficients shape {self.coefficients.shape} "
@@ -114,7 +115,12 @@ class Image:
         if bad:
             raise ImageError(f"image {source!r}: {bad} non-finite (NaN/inf) pixel values")
         coefficients = ndimage.spline_filter(values, order=3, output=np.float64, mode="mirror")
+        values.flags.writeable = coefficients.flags.writeable = False   # owned here: no copy
         return cls(values, coefficients, float(values.max() - values.min()), str(source))
+
+    def __repr__(self) -> str:
+        h, w = self.values.shape
+        return f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g})"
 
     @property
     def shape(self) -> tuple[int, int]:

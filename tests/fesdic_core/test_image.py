@@ -165,3 +165,15 @@ def test_from_array_errors():
         pyramid(_random_image(), 0)
     with pytest.raises(ImageError, match="too small"):
         Image.from_array(np.zeros((1, 4))).coarsen()
+
+
+def test_image_arrays_are_read_only_and_caller_arrays_untouched():
+    a = np.random.default_rng(9).uniform(0, 1, size=(5, 6))
+    image = Image.from_array(a)
+    direct = Image(a, a, 1.0, "direct")
+    assert a.flags.writeable
+    for arr in (image.values, image.coefficients, direct.values):
+        with pytest.raises(ValueError):
+            arr[0, 0] = 1.0
+    with pytest.raises(ImageError, match="coefficients shape"):
+        Image(a, a[:4], 1.0, "mismatch")
