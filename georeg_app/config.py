@@ -1,0 +1,403 @@
+"""The TOML configuration of ``georeg measure`` and ``georeg compare``.
+
+Relative paths are resolved against the folder of the configuration file. Unknown keys
+(at any level), wrong types, missing required keys and missing files are errors
+(:class:`ConfigError`) that name the file, the section and the key, e.g.::
+
+    ConfigError: config.toml: [method] levels: expected an integer, got "three"
+    ConfigError: config.toml: [geometry] radius: unknown key (did you mean hole_radius_mm?)
+
+A complete example (every key; optional keys show their default in parentheses)::
+
+    [images]                      # required: the stereo pair (any format OpenCV reads)
+    cam0 = "images/left.tif"
+    cam1 = "images/right.tif"
+
+    [cameras]                     # required: exactly one of `file` or `pyvale_csv`
+    file = "cameras.json"         # the core's JSON camera file (intrinsics + poses)
+    # pyvale_csv = "calib.csv"    # a pyvale stereo calibration CSV (cam0 at the origin);
+                                  # the specimen pose then comes from >= 4 landmarks:
+    # [[landmarks]]               # one table per landmark (also accepted: [[cameras.landmarks]])
+    # xyz_mm = [-50.0, -25.0, 0.0]   # world point on the specimen (mm)
+    # cam0_px = [812.3, 1040.8]      # where camera 0 sees it (x = column, y = row, px)
+    # cam1_px = [640.1, 1032.5]      # where camera 1 sees it
+
+    [geometry]                    # required: the nominal surface
+    kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh"
+    length_mm = 100.0             # along x; rectangle and plate_with_hole
+    width_mm = 50.0               # along y; rectangle and plate_with_hole
+    hole_radius_mm = 14.0         # plate_with_hole only (0 < r < width/2)
+    # file = "specimen.msh"       # kind = "mesh" only: any surface mesh meshio reads
+    elements = 400                # approximate number of FE elements (default: chosen by the method)
+                                  # (plates are centred at the world origin in the z = 0 plane)
+
+    [method]                      # optional section
+    name = "georeg"               # "fe" | "tikhonov" | "georeg"       (default "georeg")
+    levels = 3                    # spline levels of georeg            (default 3)
+    scales = 3                    # image scales, coarse to fine       (default 3)
+    tikhonov_length_mm = [5.0, 10.0, 20.0]   # one number or a list    (default [5, 10, 20])
+    calibrate = true              # fixed point calibration <-> shape  (default true)
+    keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
+    normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
+    max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
+
+    [output]                      # optional section
+    dir = "georeg_out"            # output folder (default "georeg_out"; `--out` overrides)
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import logging
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+METHOD_NAMES = ("fe", "tikhonov", "georeg")
+GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh")
+NORMALISATIONS = ("element", "global", "none")
+DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0)
+DEFAULT_OUTPUT_DIR = "georeg_out"
+
+
+class ConfigError(ValueError):
+    """A configuration file is unusable; the message names the file, section and key."""
+
+
+class ConfigFileNotFoundError(ConfigError, FileNotFoundError):
+    """A file referenced by the configuration does not exist."""
+
+
+@dataclass(frozen=True)
+class ImagesConfig:
+    cam0: Path
+    cam1: Path
+
+
+@dataclass(frozen=True, eq=False)
+class Landmark:
+    """A world point seen in both images: ``xyz_mm`` (3,), ``cam0_px`` (2,), ``cam1_px`` (2,)."""
+
+    xyz_mm: np.ndarray
+    cam0_px: np.ndarray
+    cam1_px: np.ndarray
+
+
+@dataclass(frozen=True)
+class CamerasConfig:
+    """Exactly one of ``file`` (JSON cameras) or ``pyvale_csv`` (+ >= 4 landmarks)."""
+
+    file: Path | None = None
+    pyvale_csv: Path | None = None
+    landmarks: tuple[Landmark, ...] = ()
+
+
+@dataclass(frozen=True)
+class GeometryConfig:
+    """Nominal surface; plates are centred at the origin in z = 0, x along the length."""
+
+    kind: str
+    length_mm: float | None = None
+    width_mm: float | None = None
+    hole_radius_mm: float | None = None
+    file: Path | None = None
+    elements: int | None = None
+
+
+@dataclass(frozen=True)
+class MethodConfig:
+    name: str = "georeg"
+    levels: int = 3
+    scales: int = 3
+    tikhonov_length_mm: tuple[float, ...] = DEFAULT_TIKHONOV_LENGTHS_MM
+    calibrate: bool = True
+    keep_stereo: bool = True
+    normalisation: str = "element"
+    max_fixed_point: int = 10
+
+    @property
+    def scale_sequence(self) -> tuple[int, ...]:
+        """Image scales coarse to fine, e.g. ``(2, 1, 0)`` for ``scales = 3``."""
+        return tuple(range(self.scales - 1, -1, -1))
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    dir: Path
+
+
+@dataclass(frozen=True)
+class Config:
+    images: ImagesConfig
+    cameras: CamerasConfig
+    geometry: GeometryConfig
+    method: MethodConfig
+    output: OutputConfig
+    source: Path
+
+    def with_output_dir(self, out_dir: str | os.PathLike) -> Config:
+        """The same configuration writing to ``out_dir``."""
+        return dataclasses.replace(self, output=OutputConfig(Path(out_dir)))
+
+
+# --------------------------------------------------------------------------- reading helpers
+
+def _show(value: Any) -> str:
+    """A value as it would read in TOML (strings quoted, booleans lower case)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    return str(value)
+
+
+class _Table:
+    """Keys of one TOML table, popped with type checks; leftovers are unknown keys."""
+
+    def __init__(self, data: Any, where: str, source: Path):
+        self.where, self.source = where, source
+        if not isinstance(data, dict):
+            raise self.error(None, f"expected a table, got {_show(data)}")
+        self.data = dict(data)
+        self.known: list[str] = []
+
+    def error(self, key: str | None, message: str, cls: type = ConfigError) -> ConfigError:
+        if key is None:
+            at = self.where
+        else:
+            at = f"{self.where} {key}" if self.where else f"[{key}]"   # top level: a section
+        return cls(f"{self.source}: {at}: {message}" if at else f"{self.source}: {message}")
+
+    def take(self, key: str, convert: Callable[[Any], Any], what: str, required: bool = False,
+             default: Any = None) -> Any:
+        self.known.append(key)
+        if key not in self.data:
+            if required:
+                raise self.error(key, "missing required key")
+            return default
+        value = self.data.pop(key)
+        try:
+            return convert(value)
+        except (TypeError, ValueError):
+            raise self.error(key, f"expected {what}, got {_show(value)}") from None
+
+    def finish(self) -> None:
+        for key in self.data:
+            close = difflib.get_close_matches(key, self.known, n=1, cutoff=0.5)
+            hint = f" (did you mean {close[0]}?)" if close else f" (known keys: {', '.join(self.known)})"
+            raise self.error(key, "unknown key" + hint)
+
+
+def _integer(value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError
+    return value
+
+
+def _number(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise TypeError
+    return float(value)
+
+
+def _boolean(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise TypeError
+    return value
+
+
+def _string(value: Any) -> str:
+    if not isinstance(value, str):
+        raise TypeError
+    return value
+
+
+def _vector(n: int) -> Callable[[Any], np.ndarray]:
+    def convert(value: Any) -> np.ndarray:
+        if not isinstance(value, list) or len(value) != n:
+            raise TypeError
+        out = np.array([_number(v) for v in value])
+        out.setflags(write=False)
+        return out
+    return convert
+
+
+def _numbers(value: Any) -> tuple[float, ...]:
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ValueError
+    return tuple(_number(v) for v in values)
+
+
+def _check(table: _Table, key: str, value: Any, ok: bool, requirement: str) -> None:
+    if value is not None and not ok:
+        raise table.error(key, f"must be {requirement}, got {_show(value)}")
+
+
+def _existing_file(table: _Table, key: str, value: str | None, base: Path) -> Path | None:
+    if value is None:
+        return None
+    path = Path(value).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise table.error(key, f"file not found: {path}", ConfigFileNotFoundError)
+    return path
+
+
+# --------------------------------------------------------------------------- sections
+
+def _images(data: Any, source: Path, base: Path) -> ImagesConfig:
+    t = _Table(data, "[images]", source)
+    cam0 = t.take("cam0", _string, "a file path (string)", required=True)
+    cam1 = t.take("cam1", _string, "a file path (string)", required=True)
+    t.finish()
+    return ImagesConfig(_existing_file(t, "cam0", cam0, base), _existing_file(t, "cam1", cam1, base))
+
+
+def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
+    if not isinstance(data, list):
+        raise ConfigError(f"{source}: {where}: expected an array of tables ([[landmarks]]), "
+                          f"got {_show(data)}")
+    out = []
+    for i, item in enumerate(data):
+        t = _Table(item, f"{where}[{i}]", source)
+        xyz = t.take("xyz_mm", _vector(3), "a list of 3 numbers", required=True)
+        p0 = t.take("cam0_px", _vector(2), "a list of 2 numbers", required=True)
+        p1 = t.take("cam1_px", _vector(2), "a list of 2 numbers", required=True)
+        t.finish()
+        out.append(Landmark(xyz, p0, p1))
+    return tuple(out)
+
+
+def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
+    t = _Table(data, "[cameras]", source)
+    file = t.take("file", _string, "a file path (string)")
+    csv = t.take("pyvale_csv", _string, "a file path (string)")
+    nested = t.take("landmarks", lambda v: v, "an array of tables")
+    t.finish()
+    if (file is None) == (csv is None):
+        raise t.error(None, "give exactly one of `file` (JSON cameras) or `pyvale_csv`")
+    if nested is not None and top_landmarks is not None:
+        raise t.error("landmarks", "given both as [[landmarks]] and [[cameras.landmarks]]; keep one")
+    raw = nested if nested is not None else top_landmarks
+    where = "[[cameras.landmarks]]" if nested is not None else "[[landmarks]]"
+    landmarks = _landmarks(raw, where, source) if raw is not None else ()
+    if csv is not None and len(landmarks) < 4:
+        raise t.error("pyvale_csv", f"needs at least 4 [[landmarks]] to place the specimen, "
+                                    f"got {len(landmarks)}")
+    return CamerasConfig(_existing_file(t, "file", file, base),
+                         _existing_file(t, "pyvale_csv", csv, base), landmarks)
+
+
+_GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
+                  "plate_with_hole": {"length_mm", "width_mm", "hole_radius_mm"},
+                  "mesh": {"file"}}
+
+
+def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
+    t = _Table(data, "[geometry]", source)
+    kind = t.take("kind", _string, "a string", required=True)
+    if kind not in GEOMETRY_KINDS:
+        raise t.error("kind", f"expected one of {', '.join(map(json.dumps, GEOMETRY_KINDS))}, "
+                              f"got {_show(kind)}")
+    given = set(t.data)
+    values = {"length_mm": t.take("length_mm", _number, "a number (mm)"),
+              "width_mm": t.take("width_mm", _number, "a number (mm)"),
+              "hole_radius_mm": t.take("hole_radius_mm", _number, "a number (mm)"),
+              "file": t.take("file", _string, "a file path (string)")}
+    elements = t.take("elements", _integer, "an integer")
+    t.finish()
+    for key in sorted(_GEOMETRY_KEYS[kind] - given):
+        raise t.error(key, f"missing required key (for kind = {json.dumps(kind)})")
+    for key in sorted((given & set(values)) - _GEOMETRY_KEYS[kind]):
+        raise t.error(key, f"not used with kind = {json.dumps(kind)}; remove it")
+    length, width, radius = values["length_mm"], values["width_mm"], values["hole_radius_mm"]
+    _check(t, "length_mm", length, length is not None and length > 0, "> 0")
+    _check(t, "width_mm", width, width is not None and width > 0, "> 0")
+    _check(t, "hole_radius_mm", radius, radius is not None and width is not None
+           and 0 < radius < 0.5 * width, f"> 0 and < width_mm / 2 = {0.5 * (width or 0):g}")
+    _check(t, "elements", elements, elements is not None and elements >= 1, ">= 1")
+    return GeometryConfig(kind, length, width, radius,
+                          _existing_file(t, "file", values["file"], base), elements)
+
+
+def _method(data: Any, source: Path) -> MethodConfig:
+    t = _Table(data, "[method]", source)
+    d = MethodConfig()
+    m = MethodConfig(
+        name=t.take("name", _string, "a string", default=d.name),
+        levels=t.take("levels", _integer, "an integer", default=d.levels),
+        scales=t.take("scales", _integer, "an integer", default=d.scales),
+        tikhonov_length_mm=t.take("tikhonov_length_mm", _numbers, "a number or a list of numbers (mm)",
+                                  default=d.tikhonov_length_mm),
+        calibrate=t.take("calibrate", _boolean, "true or false", default=d.calibrate),
+        keep_stereo=t.take("keep_stereo", _boolean, "true or false", default=d.keep_stereo),
+        normalisation=t.take("normalisation", _string, "a string", default=d.normalisation),
+        max_fixed_point=t.take("max_fixed_point", _integer, "an integer", default=d.max_fixed_point))
+    t.finish()
+    _check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
+    _check(t, "levels", m.levels, m.levels >= 1, ">= 1")
+    _check(t, "scales", m.scales, m.scales >= 1, ">= 1")
+    _check(t, "tikhonov_length_mm", list(m.tikhonov_length_mm),
+           all(v > 0 for v in m.tikhonov_length_mm), "> 0")
+    _check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
+           "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
+    _check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
+    return m
+
+
+def _output(data: Any, source: Path, base: Path) -> OutputConfig:
+    t = _Table(data, "[output]", source)
+    out = t.take("dir", _string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
+    t.finish()
+    path = Path(out).expanduser()
+    return OutputConfig(path if path.is_absolute() else base / path)
+
+
+def load_config(path: str | os.PathLike) -> Config:
+    """Read and check a TOML configuration (schema in the module docstring).
+
+    Raises
+    ------
+    ConfigFileNotFoundError
+        If the configuration or a file it references does not exist (names the key).
+    ConfigError
+        On a TOML syntax error, an unknown key, a wrong type or value, a missing key.
+    """
+    source = Path(path)
+    if not source.is_file():
+        raise ConfigFileNotFoundError(f"{source}: configuration file not found")
+    try:
+        with open(source, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{source}: not valid TOML: {err}") from None
+    base = source.resolve().parent
+    top = _Table(data, "", source)
+    images = top.take("images", lambda v: v, "a table", required=True)
+    cameras = top.take("cameras", lambda v: v, "a table", required=True)
+    landmarks = top.take("landmarks", lambda v: v, "an array of tables")
+    geometry = top.take("geometry", lambda v: v, "a table", required=True)
+    method = top.take("method", lambda v: v, "a table", default={})
+    output = top.take("output", lambda v: v, "a table", default={})
+    top.finish()
+    config = Config(images=_images(images, source, base),
+                    cameras=_cameras(cameras, landmarks, source, base),
+                    geometry=_geometry(geometry, source, base),
+                    method=_method(method, source),
+                    output=_output(output, source, base),
+                    source=source.resolve())
+    logger.debug("configuration %s: %s", source, config)
+    return config
