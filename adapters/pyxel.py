@@ -37,7 +37,7 @@ from .protocol import LevelRecord, reduced_basis
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PyxelAdapter", "pyxel_basis", "project_on_basis", "spline_for_mesh",
+__all__ = ["PyxelAdapter", "SplineLevelTooFineError", "pyxel_basis", "project_on_basis", "spline_for_mesh",
            "correlate_multilevel", "correlate_fe", "import_pyxel"]
 
 _EXTRA_HINT = ('the pyxel adapter needs pyxel-dic (PyPI "pyxel-dic", import "pyxel"); '
@@ -156,6 +156,29 @@ def spline_for_mesh(m: Any, margin: float = 0.0, degree: int = 2,
     return SplinePatch(degrees=(p, p), knots=knots, control_points=control)
 
 
+class SplineLevelTooFineError(ValueError):
+    """A spline level has more (independent) basis functions than the mesh can carry."""
+
+
+def _check_full_rank(B: sps.csr_matrix, level: int) -> None:
+    """Raise if ``B`` (n_dof, k) has not full column rank: ``B^T H B`` would be singular."""
+    n_dof_seen = int(np.count_nonzero(B.getnnz(axis=1)))
+    if B.shape[1] > n_dof_seen:
+        raise SplineLevelTooFineError(
+            f"spline level {level} has {B.shape[1]} basis functions for {n_dof_seen} FE "
+            "dofs: it is finer than the mesh; use fewer levels or a coarser patch")
+    try:
+        diag = np.abs(spla.splu(sps.csc_matrix(B.T @ B)).U.diagonal())
+    except RuntimeError as exc:  # exactly singular
+        diag = np.zeros(1)
+        logger.debug("Gram matrix of level %d: %s", level, exc)
+    if diag.min() <= 1e-12 * diag.max():
+        raise SplineLevelTooFineError(
+            f"spline level {level}: its {B.shape[1]} basis functions are not linearly "
+            "independent at the FE nodes (too few nodes in some spline spans); use "
+            "fewer levels or a coarser patch")
+
+
 class PyxelAdapter:
     """A pyxel 2-D FE-DIC problem seen through the :class:`adapters.protocol.Adapter` protocol.
 
@@ -272,6 +295,7 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
         level = n_levels - 1 - k  # Eq. 28 numbering: 0 is the finest
         B = reduced_basis(space.operators[level], adapter.dof_layout[used], adapter.n_dof)
         B = B[:, np.flatnonzero(B.getnnz(axis=0))].tocsr()  # functions seen by no node
+        _check_full_rank(B, level)
         U_start = project_on_basis(B, U)  # pyxel restricts the updates only
         U, residual_std, n_it = adapter.correlate(B, U_start, scale)  # Eqs. 18-21
         logger.info("spline level %d (%d basis functions) at image scale %d: residual "

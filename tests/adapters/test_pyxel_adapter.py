@@ -131,3 +131,11 @@ def test_spline_regularization_beats_plain_pyxel_on_noisy_images(speckle_pair, t
     std_true = host.residual_std(U_true)
     print(f"residual std at the true field {std_true:.4f} gl")
     assert std_s <= std_true * (1.0 + 1e-3)
+
+
+def test_a_spline_level_finer_than_the_mesh_is_refused(speckle_pair):
+    f, g = speckle_pair
+    m, cam = roi_mesh(3)  # 22 x 22 elements
+    patch = adapter.spline_for_mesh(m, degree=2, elements=(6, 6))
+    with pytest.raises(adapter.SplineLevelTooFineError, match="level 0"):
+        adapter.correlate_multilevel(f, g, m, cam, patch, n_levels=3, scales=(0, 0, 0))
