@@ -1,0 +1,96 @@
+"""Calibration of the extrinsic parameters at fixed shape (Eq. 6), by Gauss-Newton.
+
+The unknowns are the 6 extrinsic parameters ``p_c = [rvec, tvec]`` of each camera (12 in
+all) or, when the stereo relation ``x_cam1 = R x_cam0 + t`` is known and kept, the 6 of
+camera 0 only (camera 1 follows). The residual is the same as the shape's (Eq. 3):
+
+    dr/dp0 = grad f0^T dx0/dp0,    dr/dp1 = -grad f1^T dx1/dp1,
+    M dp = -sum_g w_g G_g r_g,     M = sum_g w_g G_g G_g^T.
+
+Some pose directions are not seen by the gray levels (sliding a flat specimen in its
+own plane changes neither image). The step is therefore taken in the well-determined
+subspace only: ``M`` is Jacobi-scaled and inverted on its eigenvectors whose eigenvalue
+exceeds ``rcond`` times the largest, so unobservable directions keep their initial value
+(the landmark pose) instead of drifting with noise.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .quadrature import PixelQuadrature
+from .residual import GrayLevelResidual, gray_level_residual
+from .rig import place_camera1, stereo_extrinsic_jacobian
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    cameras: tuple
+    residual: GrayLevelResidual
+    iterations: int
+    converged: bool
+
+
+def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float) -> np.ndarray:
+    """Solve ``M x = rhs`` on the eigen-subspace of the Jacobi-scaled ``M`` above ``rcond``."""
+    scale = np.sqrt(np.maximum(np.diag(M), np.finfo(float).tiny))
+    Ms = M / np.outer(scale, scale)
+    values, vectors = np.linalg.eigh(Ms)
+    keep = values > rcond * values.max()
+    y = vectors[:, keep] @ ((vectors[:, keep].T @ (rhs / scale)) / values[keep])
+    return y / scale
+
+
+def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None) -> np.ndarray:
+    """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12)."""
+    g0 = np.einsum("gik,gi->gk", res.jac[0], res.grad[0])            # grad f0^T dx0/dp0
+    g1 = -np.einsum("gik,gi->gk", res.jac[1], res.grad[1])           # -grad f1^T dx1/dp1
+    if stereo_jacobian is not None:
+        return g0 + g1 @ stereo_jacobian                              # camera 1 follows camera 0
+    return np.concatenate([g0, g1], axis=1)
+
+
+def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
+                         stereo: tuple[np.ndarray, np.ndarray] | None = None,
+                         normalisation: str = "element", max_iter: int = 20,
+                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-6,
+                         extra_mask=None, log=None, context: dict | None = None) -> CalibrationResult:
+    """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
+
+    Parameters
+    ----------
+    stereo : (R, t), optional
+        Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
+    tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
+    """
+    cams = list(cameras)
+    converged, it = False, 0
+    for it in range(1, max_iter + 1):
+        res = gray_level_residual(X, quad, images, cams, normalisation, "extrinsic", extra_mask)
+        D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
+        G = _parameter_gradients(res, D)
+        w = np.where(res.mask, quad.weight_mm2, 0.0)
+        M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
+        dp = truncated_solve(M, -(G.T @ (w * res.r)), rcond)
+        if stereo is None:
+            cams = [c.with_extrinsics(c.extrinsics + dp[6 * k:6 * k + 6]) for k, c in enumerate(cams)]
+        else:
+            cam0 = cams[0].with_extrinsics(cams[0].extrinsics + dp)
+            cams = [cam0, place_camera1(cam0, cams[1], *stereo)]
+        rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
+        tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
+        if log is not None:
+            log.add(**(context or {}), stage="calibration", iteration=it,
+                    residual_percent=res.std_percent, step=max(rot, tra), n_points=int(res.mask.sum()))
+        logger.debug("calibration it %d: residual %.4f%%, |drot| %.2e rad, |dt| %.2e mm",
+                     it, res.std_percent, rot, tra)
+        if rot < tol_rad and tra < tol_mm:
+            converged = True
+            break
+    res = gray_level_residual(X, quad, images, cams, normalisation, None, extra_mask)
+    return CalibrationResult(cameras=tuple(cams), residual=res, iterations=it, converged=converged)

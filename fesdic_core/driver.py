@@ -1,0 +1,183 @@
+"""The drivers: fixed point of section 2.2 inside the multiscale loop of Remark 3.
+
+For each image scale ``s``, coarse to fine (the solution of scale ``s`` starts scale
+``s - 1``):
+
+    repeat until (p, q) stagnate:                    (fixed point, section 2.2)
+        p <- argmin_p j(S, p)      calibration, Eq. 6 (if asked)
+        q <- argmin_q j(L^T q, p)  shape, Eq. 7, each step by the StepSolver hook
+        gauge: rigid normal part of q -> camera poses (if calibrating; see gauge.py)
+
+Scale ``s`` uses the images aggregated ``s`` times (2x2 pixel means) and the matching
+cameras; the step solver is told ``s`` so that it can regularize accordingly.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from .calibration import calibrate_extrinsics
+from .gauge import transfer_rigid_part
+from .image import Image, pyramid
+from .mesh import SurfaceMesh, node_normals
+from .quadrature import PixelQuadrature, pixel_quadrature
+from .residual import NORMALISATIONS, GrayLevelResidual
+from .rig import stereo_transform
+from .shape import DivergenceError, GaussNewtonLog, current_nodes, shape_gauss_newton
+from .solvers import DirectSolver, StepSolver
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MeasurementSettings:
+    """How to run a measurement.
+
+    scales : image scales coarse to fine, e.g. (2, 1, 0); 0 is the full resolution.
+    calibrate : run the fixed point with calibration of the extrinsics (Eq. 6).
+    keep_stereo : when calibrating, keep the stereo relation of the initial cameras
+        (6 unknowns) instead of freeing both cameras (12 unknowns).
+    """
+
+    scales: tuple[int, ...] = (0,)
+    calibrate: bool = False
+    keep_stereo: bool = True
+    normalisation: str = "element"
+    max_fixed_point: int = 10
+    max_iter: int = 20
+    tol_mm: float = 1e-4
+    fixed_point_tol_mm: float = 2e-3
+    fixed_point_tol_px: float = 5e-3
+    points_per_px: float = 1.0
+    progress: bool = False
+
+    def __post_init__(self):
+        if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
+            raise ValueError(f"scales must be non-negative integers, got {self.scales!r}")
+        if list(self.scales) != sorted(self.scales, reverse=True):
+            raise ValueError(f"scales must go coarse to fine (decreasing), got {self.scales!r}")
+        if self.normalisation not in NORMALISATIONS:
+            raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {self.normalisation!r}")
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Result of a shape measurement (world coordinates of the final cameras, mm)."""
+
+    q: np.ndarray
+    nodes: np.ndarray
+    normals: np.ndarray
+    cameras: tuple
+    residual: GrayLevelResidual
+    quadrature: PixelQuadrature
+    history: tuple = field(repr=False)
+    iterations: int = 0
+    time_s: float = 0.0
+    converged: bool = True
+
+    @property
+    def residual_percent(self) -> float:
+        return self.residual.std_percent
+
+
+def _projected_shift_px(cameras_a, cameras_b, X: np.ndarray) -> float:
+    return max(float(np.max(np.linalg.norm(a.project(X) - b.project(X), axis=1)))
+               for a, b in zip(cameras_a, cameras_b))
+
+
+def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
+            solver: StepSolver | None = None, settings: MeasurementSettings = MeasurementSettings(),
+            q0: np.ndarray | None = None, normals: np.ndarray | None = None,
+            visibility: Callable[[np.ndarray, Sequence], np.ndarray] | None = None) -> Measurement:
+    """Measure the shape correction of ``mesh`` from a stereo pair.
+
+    Parameters
+    ----------
+    mesh : nominal surface mesh (mm, world frame)
+    images : the two full-resolution images
+    cameras : the two full-resolution cameras (initial poses when calibrating)
+    solver : the step solver hook (default :class:`DirectSolver`)
+    settings : MeasurementSettings
+    q0 : initial correction (default 0)
+    normals : nominal node normals (default :func:`node_normals`)
+    visibility : optional ``f(X (g,3), cameras) -> bool (g,)``, points to keep (e.g. faces
+        hidden from one camera are masked, not fitted)
+
+    Raises
+    ------
+    DivergenceError
+        If a Gauss-Newton diverged; ``err.best`` is the best Measurement reached.
+    """
+    solver = DirectSolver() if solver is None else solver
+    normals = node_normals(mesh) if normals is None else normals
+    q = np.zeros(mesh.nodes.shape[0]) if q0 is None else np.asarray(q0, float).copy()
+    cams = list(cameras)
+    stereo = stereo_transform(*cams) if (settings.calibrate and settings.keep_stereo) else None
+    pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
+    log = GaussNewtonLog()
+    t0 = time.perf_counter()
+    total_iterations, converged_all = 0, True
+    result = None
+    bar = tqdm(settings.scales, desc="scales", disable=not settings.progress, leave=False)
+    for scale in bar:
+        imgs = [p[scale] for p in pyramids]
+        scaled = [c.scaled(scale) for c in cams]
+        nodes_now = current_nodes(mesh.nodes, normals, q)
+        quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
+        node_weights = quad.L.T @ quad.weight_mm2
+        mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
+        for fp in range(1, settings.max_fixed_point + 1):
+            context = {"fixed_point": fp}
+            q_before, cams_before = q.copy(), list(cams)
+            if settings.calibrate:
+                X = quad.points(current_nodes(mesh.nodes, normals, q))
+                cal = calibrate_extrinsics(X, quad, imgs, scaled, stereo=stereo,
+                                           normalisation=settings.normalisation,
+                                           max_iter=settings.max_iter, extra_mask=mask,
+                                           log=log, context={**context, "scale": scale})
+                cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
+                scaled = [c.scaled(scale) for c in cams]
+            shape = shape_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
+                                       settings.normalisation, settings.max_iter, settings.tol_mm,
+                                       log=log, extra_mask=mask, context=context)
+            q = shape.q
+            total_iterations += shape.iterations
+            result = (shape.residual, quad)
+            if shape.diverged:
+                best = _build(mesh, normals, q, cams, result, log, total_iterations, t0, False)
+                raise DivergenceError(
+                    f"shape Gauss-Newton diverged at scale {scale} (fixed point {fp}): the residual "
+                    f"grew for several iterations; best residual {shape.residual.std_percent:.3f}% kept",
+                    best=best)
+            converged_all &= shape.converged
+            if not settings.calibrate:
+                break
+            q, cams = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
+            scaled = [c.scaled(scale) for c in cams]
+            X_nodes = current_nodes(mesh.nodes, normals, q)
+            dq = float(np.max(np.abs(q - q_before)))
+            dp = _projected_shift_px([c.scaled(scale) for c in cams_before], scaled, X_nodes)
+            logger.info("scale %d fixed point %d: residual %.3f%%, max|dq| %.2e mm, pose shift %.2e px",
+                        scale, fp, shape.residual.std_percent, dq, dp)
+            if dq < settings.fixed_point_tol_mm and dp < settings.fixed_point_tol_px:
+                break
+        else:
+            if settings.calibrate:
+                converged_all = False
+                logger.warning("fixed point did not stagnate at scale %d within %d iterations",
+                               scale, settings.max_fixed_point)
+        bar.set_postfix(residual=f"{result[0].std_percent:.2f}%")
+    return _build(mesh, normals, q, cams, result, log, total_iterations, t0, converged_all)
+
+
+def _build(mesh, normals, q, cams, result, log, iterations, t0, converged) -> Measurement:
+    residual, quad = result
+    return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
+                       cameras=tuple(cams), residual=residual, quadrature=quad,
+                       history=tuple(log.records), iterations=iterations,
+                       time_s=time.perf_counter() - t0, converged=bool(converged))

@@ -1,0 +1,76 @@
+"""The gauge between shape and camera poses, and best-fit comparisons.
+
+A rigid motion of the specimen changes the normal correction by
+``n_I . (t + w x (X_I - c))`` and is undone exactly by moving the cameras the other way:
+the residual cannot tell them apart (section 2.2). When the poses are calibrated, the
+core keeps ``q`` orthogonal to these rigid normal modes (weighted by nodal areas) and
+hands the rigid part to the camera extrinsics after each shape solve. On a flat
+nominal surface these modes are the uniform offset and the two tilts. The shape is
+reported also as "distance to best-fit plane", as the paper does.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def rigid_normal_modes(nodes: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normal components of the 6 rigid motions at the nodes, (n, 6), and the centre used."""
+    centre = nodes.mean(axis=0)
+    arm = nodes - centre
+    translations = normals                                       # n . e_k
+    rotations = np.cross(arm, normals)                           # n . (e_k x arm) = e_k . (arm x n)
+    return np.concatenate([translations, rotations], axis=1), centre
+
+
+def split_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
+                     node_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted least-squares rigid part of ``q``: returns ``(q_rigid, [t, w], centre)``."""
+    modes, centre = rigid_normal_modes(nodes, normals)
+    sw = np.sqrt(node_weights)
+    coef, *_ = np.linalg.lstsq(modes * sw[:, None], q * sw, rcond=1e-10)
+    return modes @ coef, coef, centre
+
+
+def move_cameras_with_specimen(cameras, translation: np.ndarray, rotation: np.ndarray,
+                               centre: np.ndarray) -> list:
+    """Cameras that see the specimen moved by ``X -> R(w)(X - c) + c + t`` as before.
+
+    ``x_cam = R_c X' + t_c`` with ``X' = R (X - c) + c + t`` gives the new extrinsics
+    ``R_c' = R_c R`` and ``t_c' = R_c (c + t - R c) + t_c``.
+    """
+    R, _ = cv2.Rodrigues(np.asarray(rotation, dtype=float).reshape(3, 1))
+    out = []
+    for cam in cameras:
+        Rc = cam.R
+        new_R = Rc @ R
+        new_t = Rc @ (centre + translation - R @ centre) + cam.tvec
+        rvec, _ = cv2.Rodrigues(new_R)
+        out.append(cam.with_extrinsics(np.concatenate([rvec.ravel(), new_t])))
+    return out
+
+
+def transfer_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
+                        node_weights: np.ndarray, cameras) -> tuple[np.ndarray, list]:
+    """Remove the rigid normal part from ``q`` and give it to the camera poses."""
+    q_rigid, coef, centre = split_rigid_part(q, nodes, normals, node_weights)
+    return q - q_rigid, move_cameras_with_specimen(cameras, coef[:3], coef[3:], centre)
+
+
+def best_fit_plane_distance(points: np.ndarray) -> np.ndarray:
+    """Signed distance of each point to the least-squares plane of all points (mm)."""
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    normal = vt[2]
+    if normal[2] < 0:
+        normal = -normal
+    return centred @ normal
+
+
+def rigid_align(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Best rigid motion (R, t) with ``R source + t ~ target`` in least squares (Kabsch)."""
+    cs, ct = source.mean(axis=0), target.mean(axis=0)
+    U, _, Vt = np.linalg.svd((source - cs).T @ (target - ct))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, ct - R @ cs

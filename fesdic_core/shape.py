@@ -1,0 +1,124 @@
+"""Shape measurement at fixed cameras: Eq. 7 by Gauss-Newton, Eq. 8 with Remark 1.
+
+The unknown is the scalar correction ``q_I`` of each node along its nominal unit normal
+``n_I`` (Remark 1), so the surface is ``X = sum_I L_I (X0_I + q_I n_I)``. With
+``g = J0^T grad f0 - J1^T grad f1`` at each integration point (normalised gradients),
+
+    phi_g[I] = L_I(X_g) (g_g . n_I),
+    H_FE = sum_g w_g phi_g phi_g^T,    b_FE = -sum_g w_g phi_g r_g          (Eq. 8)
+
+and each step ``d`` comes from the :class:`~fesdic_core.solvers.StepSolver` hook.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+import scipy.sparse as sps
+
+from .quadrature import PixelQuadrature
+from .residual import GrayLevelResidual, gray_level_residual
+from .solvers import StepSolver
+
+logger = logging.getLogger(__name__)
+
+
+class DivergenceError(RuntimeError):
+    """Gauss-Newton diverged; ``best`` holds the best state reached (lowest residual)."""
+
+    def __init__(self, message: str, best=None):
+        super().__init__(message)
+        self.best = best
+
+
+def current_nodes(nodes0: np.ndarray, normals: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Node positions of the corrected surface ``X0_I + q_I n_I`` (Remark 1)."""
+    return nodes0 + q[:, None] * normals
+
+
+def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelResidual
+                    ) -> tuple[sps.csr_matrix, np.ndarray]:
+    """Assemble ``H_FE`` and ``b_FE`` of Eq. 8 in the normal-projected unknown (Remark 1)."""
+    g = (np.einsum("gij,gi->gj", res.jac[0], res.grad[0])
+         - np.einsum("gij,gi->gj", res.jac[1], res.grad[1]))          # J0^T df0 - J1^T df1
+    L = quad.L.tocoo()
+    phi_values = L.data * np.einsum("kd,kd->k", g[L.row], normals[L.col])   # L_I (g . n_I)
+    phi = sps.csr_matrix((phi_values, (L.row, L.col)), shape=L.shape)
+    w = np.where(res.mask, quad.weight_mm2, 0.0)
+    H = (phi.T @ sps.diags(w) @ phi).tocsr()                          # Eq. 8
+    b = -(phi.T @ (w * res.r))                                        # Eq. 8
+    return H, b
+
+
+@dataclass
+class GaussNewtonLog:
+    """Iteration records shared by the drivers (plain dicts, for CSV and figures)."""
+
+    records: list = field(default_factory=list)
+    t0: float = field(default_factory=time.perf_counter)
+
+    def add(self, **record) -> None:
+        record["time_s"] = time.perf_counter() - self.t0
+        self.records.append(record)
+
+
+@dataclass(frozen=True)
+class ShapeResult:
+    q: np.ndarray
+    residual: GrayLevelResidual
+    iterations: int
+    converged: bool
+    diverged: bool
+
+
+def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
+                       quad: PixelQuadrature, images: Sequence, cameras: Sequence,
+                       solver: StepSolver, scale: int = 0, normalisation: str = "element",
+                       max_iter: int = 20, tol_mm: float = 1e-4, divergence_window: int = 3,
+                       log: GaussNewtonLog | None = None, extra_mask=None,
+                       context: dict | None = None,
+                       on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
+    """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
+
+    Stops when ``max |d| < tol_mm`` (q stagnates). If the residual grows for
+    ``divergence_window`` consecutive iterations, stops and returns the best state
+    with ``diverged=True``.
+    """
+    q = q0.copy()
+    best_q, best_res, best_std = q.copy(), None, np.inf
+    rising, converged, diverged, it = 0, False, False, 0
+    previous = np.inf
+    for it in range(1, max_iter + 1):
+        X = quad.points(current_nodes(nodes0, normals, q))
+        res = gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
+        std = res.std_percent
+        if std < best_std:
+            best_q, best_res, best_std = q.copy(), res, std
+        rising = rising + 1 if std > previous else 0
+        previous = std
+        if rising >= divergence_window:
+            diverged = True
+            logger.warning("shape Gauss-Newton diverged at scale %d (residual grew %d times); "
+                           "keeping the best state (%.3f%%)", scale, rising, best_std)
+            break
+        H, b = shape_operators(quad, normals, res)
+        d = solver.solve(H, b, q, scale)
+        q = q + d
+        step = float(np.max(np.abs(d))) if d.size else 0.0
+        if log is not None:
+            log.add(**(context or {}), scale=scale, stage="shape", iteration=it,
+                    residual_percent=std, step=step, n_points=int(res.mask.sum()))
+        if on_iteration is not None:
+            on_iteration(it, std)
+        logger.debug("shape GN scale %d it %d: residual %.4f%%, max|d| %.2e mm", scale, it, std, step)
+        if step < tol_mm:
+            converged = True
+            break
+    X = quad.points(current_nodes(nodes0, normals, q))
+    res = gray_level_residual(X, quad, images, cameras, normalisation, None, extra_mask)
+    if diverged or res.std_percent > best_std:
+        q, res = best_q, best_res
+    return ShapeResult(q=q, residual=res, iterations=it, converged=converged, diverged=diverged)

@@ -1,0 +1,16 @@
+"""Shared synthetic stereo scenes (rendered once per session, small and deterministic)."""
+import numpy as np
+import pytest
+
+from fesdic_core.image import Image
+from fesdic_core.render import demo_cameras, render_stereo, twisted_plate
+
+
+@pytest.fixture(scope="session")
+def twisted_scene():
+    """Twisted 60 x 40 mm plate, 0.5 mm at the corners, two cameras at 25 deg, no noise."""
+    specimen = twisted_plate(60.0, 40.0, corner_mm=0.5, speckle_mm=0.4, seed=3)
+    cameras = demo_cameras(image_size=(640, 480), field_mm=72.0)
+    arrays = render_stereo(specimen, cameras, supersample=3, noise_std=0.0, seed=1, progress=False)
+    images = tuple(Image.from_array(a, source=f"synthetic cam{k}") for k, a in enumerate(arrays))
+    return specimen, cameras, images

@@ -1,0 +1,87 @@
+import numpy as np
+import pytest
+
+from fesdic_core.mesh import node_normals, rectangle_mesh
+from fesdic_core.quadrature import pixel_quadrature
+from fesdic_core.render import true_normal_offset
+from fesdic_core.residual import gray_level_residual
+from fesdic_core.shape import current_nodes, shape_gauss_newton, shape_operators
+from fesdic_core.solvers import DirectSolver, StepSolver
+
+
+def _objective(q, mesh, normals, quad, images, cameras):
+    X = quad.points(current_nodes(mesh.nodes, normals, q))
+    res = gray_level_residual(X, quad, images, cameras, "none", None)
+    return 0.5 * np.sum(np.where(res.mask, quad.weight_mm2, 0.0) * res.r ** 2), res.mask
+
+
+def test_b_is_minus_the_gradient_of_j(twisted_scene):
+    """b_FE of Eq. 8 is -dj/dq (without normalisation the linearisation is exact)."""
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(50.0, 30.0, 3, 2, family="Q9")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.7)
+    rng = np.random.default_rng(0)
+    q = 0.05 * rng.standard_normal(mesh.n_nodes)
+    X = quad.points(current_nodes(mesh.nodes, normals, q))
+    res = gray_level_residual(X, quad, images, cameras, "none", "point")
+    H, b = shape_operators(quad, normals, res)
+    h = 1e-5
+    for I in rng.choice(mesh.n_nodes, 6, replace=False):
+        e = np.zeros(mesh.n_nodes)
+        e[I] = h
+        jp, mp = _objective(q + e, mesh, normals, quad, images, cameras)
+        jm, mm = _objective(q - e, mesh, normals, quad, images, cameras)
+        assert np.array_equal(mp, mm)
+        np.testing.assert_allclose(-(jp - jm) / (2 * h), b[I], rtol=2e-3, atol=1e-6 * np.abs(b).max())
+    np.testing.assert_allclose((H - H.T).toarray(), 0.0, atol=1e-9 * abs(H).max())
+    assert np.linalg.eigvalsh(H.toarray()).min() > -1e-9 * abs(H).max()
+
+
+@pytest.mark.parametrize("family,nx,ny", [("Q4", 12, 8), ("Q9", 6, 4), ("T3", 12, 8)])
+def test_twisted_plate_with_exact_cameras(twisted_scene, family, nx, ny):
+    """Done-criterion of the core issue: RMS error < 2% of the maximum deviation, no noise."""
+    specimen, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, nx, ny, family=family)
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras)
+    result = shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras,
+                                DirectSolver())
+    truth = true_normal_offset(specimen, mesh.nodes, normals)
+    rms = np.sqrt(np.mean((result.q - truth) ** 2))
+    assert result.converged and not result.diverged
+    assert rms < 0.02 * np.abs(truth).max(), f"RMS error {rms:.4f} mm"
+
+
+class _RecordingSolver:
+    def __init__(self, factor=1.0):
+        self.factor, self.scales = factor, []
+
+    def solve(self, H, b, q, scale):
+        self.scales.append(scale)
+        return self.factor * DirectSolver().solve(H, b, q, scale)
+
+
+def test_step_solver_hook_is_called_with_the_scale(twisted_scene):
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 3, 2, family="Q4")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    solver = _RecordingSolver()
+    assert isinstance(solver, StepSolver)
+    shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras, solver,
+                       scale=2, max_iter=2)
+    assert solver.scales == [2, 2]
+
+
+def test_divergence_stops_and_keeps_the_best_state(twisted_scene):
+    """A solver that steps the wrong way makes the residual grow: stop, keep the best q."""
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    result = shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras,
+                                _RecordingSolver(factor=-1.0), max_iter=10, divergence_window=3)
+    assert result.diverged and not result.converged
+    np.testing.assert_array_equal(result.q, 0.0)          # the start was the best state
+    assert result.iterations <= 5
