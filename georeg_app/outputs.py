@@ -1,0 +1,282 @@
+"""Output files of a run, written atomically.
+
+Single files are written to a temporary file in the same folder and moved into place
+with ``os.replace`` (on any exception the temporary file is removed): a reader never
+sees a half-written file.
+
+A whole run is written through :class:`OutputWriter`: every file goes first into a
+hidden staging folder next to the output folder (``.<name>.staging-XXXX``) and the files
+are moved into the output folder only when all of them were written. An error or an
+interruption (exception, Ctrl-C) while the outputs are produced removes the staging
+folder and leaves the output folder exactly as it was: no partial file, no partial set.
+(A hard kill can only leave the hidden staging folder behind, never a file in the
+output folder.) Files of an earlier run with the same names are replaced; other files
+of the output folder are left alone.
+
+Files of a run (:func:`write_all`): ``summary.json`` (schema of :func:`summary_dict`),
+one ``<label>.vtu`` per method, ``<label>_spline.json`` and ``<label>_spline.igs`` for
+each georeg method, ``convergence.csv``, the PNG figures and ``report.html``.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+logger = logging.getLogger(__name__)
+
+SUMMARY_FILE = "summary.json"
+CONVERGENCE_FILE = "convergence.csv"
+REPORT_FILE = "report.html"
+CONVERGENCE_COLUMNS = ("method", "scale", "fixed_point", "stage", "iteration", "residual_percent",
+                       "time_s", "time_per_fine_iteration")
+
+
+# --------------------------------------------------------------------------- atomic writers
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file of the same folder + ``os.replace``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_text_atomic(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` atomically (see :func:`write_bytes_atomic`)."""
+    return write_bytes_atomic(path, text.encode(encoding))
+
+
+def _json_ready(value: Any) -> Any:
+    """numpy scalars/arrays to Python; non-finite floats to None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_ready(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def write_json_atomic(path: str | os.PathLike, obj: Any, indent: int = 2) -> Path:
+    """Write ``obj`` as JSON atomically (numpy values converted, NaN/inf written as null)."""
+    return write_text_atomic(path, json.dumps(_json_ready(obj), indent=indent, allow_nan=False) + "\n")
+
+
+class OutputWriter:
+    """Stage all files of a run and publish them in ``out_dir`` only if the run succeeds.
+
+    >>> with OutputWriter("out") as w:            # doctest: +SKIP
+    ...     w.write_text("report.html", html)
+    ...     write_mesh(w.path("fe.vtu"), mesh)    # any writer that takes a path
+
+    After the ``with`` block, ``w.published`` lists the final paths. If the block raises,
+    nothing is written to ``out_dir`` (see the module docstring).
+    """
+
+    def __init__(self, out_dir: str | os.PathLike):
+        self.out_dir = Path(out_dir)
+        self.staging: Path | None = None
+        self.names: list[str] = []
+        self.published: list[Path] = []
+
+    def __enter__(self) -> OutputWriter:
+        self.out_dir.parent.mkdir(parents=True, exist_ok=True)
+        if self.out_dir.exists() and not self.out_dir.is_dir():
+            raise NotADirectoryError(f"output folder {self.out_dir} exists and is not a folder")
+        self.staging = Path(tempfile.mkdtemp(dir=self.out_dir.parent,
+                                             prefix=f".{self.out_dir.name}.staging-"))
+        return self
+
+    def path(self, name: str) -> Path:
+        """Staged path of the output file ``name`` (a plain file name, no folder)."""
+        if self.staging is None:
+            raise RuntimeError("OutputWriter.path() called outside its `with` block")
+        if not name or Path(name).name != name or name.startswith("."):
+            raise ValueError(f"output file name {name!r} must be a plain, non-hidden file name")
+        if name not in self.names:
+            self.names.append(name)
+        return self.staging / name
+
+    def write_bytes(self, name: str, data: bytes) -> Path:
+        return write_bytes_atomic(self.path(name), data)
+
+    def write_text(self, name: str, text: str) -> Path:
+        return write_text_atomic(self.path(name), text)
+
+    def write_json(self, name: str, obj: Any) -> Path:
+        return write_json_atomic(self.path(name), obj)
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        staging, self.staging = self.staging, None
+        try:
+            if exc_type is None:
+                self._publish(staging)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        if exc_type is not None:
+            logger.debug("run failed: staged outputs discarded, %s untouched", self.out_dir)
+
+    def _publish(self, staging: Path) -> None:
+        missing = [n for n in self.names if not (staging / n).is_file()]
+        if missing:
+            raise RuntimeError(f"outputs announced but not written: {', '.join(missing)}")
+        if not self.out_dir.exists():
+            os.replace(staging, self.out_dir)                # the whole folder at once
+            staging.mkdir()                                  # (rmtree target of __exit__)
+        else:
+            for name in self.names:
+                os.replace(staging / name, self.out_dir / name)
+        self.published = [self.out_dir / n for n in self.names]
+        logger.info("wrote %d files to %s", len(self.published), self.out_dir)
+
+
+# --------------------------------------------------------------------------- run contents
+
+def safe_stem(label: str) -> str:
+    """A file-name stem from a method label: ``"Tikhonov 10 mm" -> "tikhonov_10_mm"``."""
+    stem = re.sub(r"[^a-z0-9.+-]+", "_", label.lower()).strip("_.")
+    return stem or "method"
+
+
+def method_stems(run) -> list[str]:
+    """Unique file-name stems of the methods of ``run``, from their labels."""
+    stems: list[str] = []
+    for result in run.results:
+        stem = base = safe_stem(result.spec.label)
+        k = 2
+        while stem in stems or stem in ("summary", "convergence", "report"):
+            stem, k = f"{base}_{k}", k + 1
+        stems.append(stem)
+    return stems
+
+
+def _rms(values: np.ndarray) -> float:
+    values = np.asarray(values, float)
+    return float(np.sqrt(np.mean(values ** 2))) if values.size else float("nan")
+
+
+def summary_dict(run) -> dict:
+    """The ``summary.json`` document (issue 4; extend, do not change).
+
+    ``{"truth_available": bool, "methods": [{"name", "param", "shape_rms_error_mm",
+    "distance_to_bfp_rms_mm", "residual_percent", "iterations", "time_s", "mesh_file",
+    "label", "converged", "scales"}]}``; ``param`` and ``shape_rms_error_mm`` may be null.
+    """
+    methods = []
+    for result, stem in zip(run.results, method_stems(run)):
+        m, spec = result.measurement, result.spec
+        methods.append({
+            "name": str(spec.name),
+            "param": None if spec.param is None else float(spec.param),
+            "shape_rms_error_mm": (None if result.shape_rms_error_mm is None
+                                   else float(result.shape_rms_error_mm)),
+            "distance_to_bfp_rms_mm": _rms(result.distance_to_bfp_mm),
+            "residual_percent": float(m.residual_percent),
+            "iterations": int(m.iterations),
+            "time_s": float(m.time_s),
+            "mesh_file": f"{stem}.vtu",
+            "label": str(spec.label),
+            "converged": bool(m.converged),
+            "scales": [int(s) for s in spec.scales],
+        })
+    return {"truth_available": bool(run.truth_available), "methods": methods}
+
+
+def write_method_vtu(path: str | os.PathLike, result) -> Path:
+    """VTU of the measured surface (world frame, mm) with point data
+    ``shape_correction_mm`` (q, along the nominal normals) and ``distance_to_bfp_mm``."""
+    from fesdic_core.mesh_io import write_mesh
+    m = result.measurement
+    mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
+    write_mesh(path, mesh, point_data={"shape_correction_mm": np.asarray(m.q, float),
+                                       "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)})
+    return Path(path)
+
+
+def convergence_rows(run) -> list[dict]:
+    """One row per history record of every method (columns :data:`CONVERGENCE_COLUMNS`)."""
+    unit = float(run.one_fine_iteration_s)
+    rows = []
+    for result in run.results:
+        for record in result.measurement.history:
+            t = float(record.get("time_s", float("nan")))
+            rows.append({"method": result.spec.label, "scale": record.get("scale", ""),
+                         "fixed_point": record.get("fixed_point", ""), "stage": record.get("stage", ""),
+                         "iteration": record.get("iteration", ""),
+                         "residual_percent": record.get("residual_percent", ""), "time_s": t,
+                         "time_per_fine_iteration": t / unit if unit > 0 else float("nan")})
+    return rows
+
+
+def write_convergence_csv(path: str | os.PathLike, run) -> Path:
+    """``convergence.csv``: the iteration history of every method (one row per record)."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CONVERGENCE_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(convergence_rows(run))
+    return write_text_atomic(path, buffer.getvalue())
+
+
+def write_spline_outputs(json_path: str | os.PathLike, iges_path: str | os.PathLike, result) -> None:
+    """The measured spline of a georeg result as JSON (with the control values q_s) and IGES."""
+    from georeg_plugin.spline_io import write_iges, write_spline_json
+    patch, values = result.spline, result.spline_values
+    n_ctrl = int(np.prod(patch.control_points.shape[:2]))
+    if values is not None and np.size(values) != n_ctrl:
+        logger.warning("%s: %d control values for %d control points; not written",
+                       result.spec.label, np.size(values), n_ctrl)
+        values = None
+    write_spline_json(json_path, patch, scalar_field=values)
+    write_iges(iges_path, patch)
+
+
+def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None = None) -> list[Path]:
+    """Write every output of ``run`` into ``out_dir`` (all or nothing, see OutputWriter).
+
+    ``figures`` (name -> PNG bytes) defaults to :func:`georeg_app.figures.make_figures`.
+    Returns the final paths.
+    """
+    from .figures import make_figures
+    from .report import report_html
+
+    figures = make_figures(run) if figures is None else figures
+    with OutputWriter(out_dir) as w:
+        w.write_json(SUMMARY_FILE, summary_dict(run))
+        for result, stem in zip(run.results, method_stems(run)):
+            write_method_vtu(w.path(f"{stem}.vtu"), result)
+            if result.spline is not None:
+                write_spline_outputs(w.path(f"{stem}_spline.json"), w.path(f"{stem}_spline.igs"),
+                                     result)
+        write_convergence_csv(w.path(CONVERGENCE_FILE), run)
+        for name, png in figures.items():
+            w.write_bytes(f"{name}.png", png)
+        w.write_text(REPORT_FILE, report_html(run, figures))
+    return w.published
+
