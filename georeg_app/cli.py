@@ -1,0 +1,163 @@
+"""The ``georeg`` command line.
+
+::
+
+    georeg demo    [--out DIR]              # embedded synthetic twisted open-hole specimen
+    georeg measure CONFIG.toml [--out DIR]  # the method of [method] on user data
+    georeg compare CONFIG.toml [--out DIR]  # FE, Tikhonov (each length), georeg multi/monoscale
+
+Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
+tracebacks on error), ``--version``. An error prints one line ``georeg: error: <message>``
+on stderr and exits with status 1; nothing is written to the output folder then (all
+outputs are staged and published together, see :mod:`georeg_app.outputs`).
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import sys
+import time
+import traceback
+from importlib import metadata
+from pathlib import Path
+from typing import Sequence
+
+from fesdic_core.shape import DivergenceError
+
+from .config import Config, load_config
+
+logger = logging.getLogger(__name__)
+
+PROG = "georeg"
+DEFAULT_DEMO_OUT = "demo_out"
+EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
+
+
+def _version() -> str:
+    try:
+        return metadata.version("georeg")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _common(parser: argparse.ArgumentParser, suppress: bool) -> None:
+    """--quiet/--verbose, accepted before and after the sub-command."""
+    default = argparse.SUPPRESS if suppress else False
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", action="store_true", default=default,
+                       help="warnings and errors only, no progress bars")
+    group.add_argument("-v", "--verbose", action="store_true", default=default,
+                       help="debug messages, and the traceback of an error")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG, description="FE stereo-DIC shape measurement with multilevel geometric "
+                               "(spline) regularization (Colantonio et al. 2020).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    _common(parser, suppress=False)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    demo = sub.add_parser("demo", help="render the embedded twisted open-hole specimen and "
+                                       "compare all methods on it (no input needed)")
+    demo.add_argument("--out", type=Path, default=Path(DEFAULT_DEMO_OUT),
+                      help=f"output folder (default: {DEFAULT_DEMO_OUT})")
+    for name, text in (("measure", "measure the shape with the method of the configuration"),
+                       ("compare", "run all methods (FE, Tikhonov, georeg) on the same data")):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
+        p.add_argument("--out", type=Path, default=None,
+                       help="output folder (default: [output] dir of the configuration)")
+    for p in sub.choices.values():
+        _common(p, suppress=True)
+    return parser
+
+
+@contextlib.contextmanager
+def _logging_to_stderr(quiet: bool, verbose: bool):
+    """Log to stderr at the level of --quiet/--verbose for the duration of a command."""
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    root, quiet_loggers = logging.getLogger(), ("matplotlib", "PIL")
+    saved = root.level, [logging.getLogger(n).level for n in quiet_loggers]
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s" if verbose
+                                           else f"{PROG}: %(message)s"))
+    root.addHandler(handler)
+    root.setLevel(level)
+    for name in quiet_loggers:            # third-party chatter stays out of the way
+        logging.getLogger(name).setLevel(max(level, logging.INFO))
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(saved[0])
+        for name, lvl in zip(quiet_loggers, saved[1]):
+            logging.getLogger(name).setLevel(lvl)
+
+
+def measure_specs(config: Config) -> list:
+    """The method(s) of ``[method]``: one spec, or one per Tikhonov length."""
+    from .pipeline import MethodSpec
+    m = config.method
+    scales = m.scale_sequence
+    multi = " (multiscale)" if len(scales) > 1 else ""
+    if m.name == "tikhonov":
+        return [MethodSpec("tikhonov", float(length), scales, f"Tikhonov {length:g} mm")
+                for length in m.tikhonov_length_mm]
+    label = {"fe": "FE", "georeg": "georeg"}[m.name] + multi
+    return [MethodSpec(m.name, None, scales, label)]
+
+
+def _run(args: argparse.Namespace) -> Path:
+    """Run a command; return the report's path."""
+    config = None if args.command == "demo" else load_config(args.config)   # fail fast
+    from .outputs import REPORT_FILE, write_all
+    from .pipeline import default_specs, demo_config, run_methods
+
+    progress = not args.quiet
+    images = truth = None
+    if config is None:
+        out = args.out
+        config, images, truth = demo_config(out)
+        specs = default_specs(config)
+    else:
+        out = args.out if args.out is not None else config.output.dir
+        config = config.with_output_dir(out)
+        specs = default_specs(config) if args.command == "compare" else measure_specs(config)
+    logger.info("%s: %d method(s): %s", args.command, len(specs), ", ".join(s.label for s in specs))
+    run = run_methods(config, specs, images=images, truth=truth, progress=progress)
+    paths = write_all(out, run)
+    logger.info("wrote %d files in %s", len(paths), out)
+    return Path(out) / REPORT_FILE
+
+
+def _error_line(err: BaseException) -> str:
+    if isinstance(err, FileNotFoundError) and err.filename:
+        message = f"file not found: {err.filename}"
+    else:
+        message = str(err) or type(err).__name__
+    return " ".join(message.split())          # one line
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``georeg``; returns the exit status (0 ok, 1 error, 130 interrupted)."""
+    args = build_parser().parse_args(argv)
+    expected = (ValueError, OSError, RuntimeError, DivergenceError)
+    with _logging_to_stderr(args.quiet, args.verbose):
+        t0 = time.perf_counter()
+        try:
+            report = _run(args)
+        except KeyboardInterrupt:
+            sys.stderr.write(f"{PROG}: error: interrupted (nothing written)\n")
+            return EXIT_INTERRUPTED
+        except expected as err:
+            if args.verbose:
+                traceback.print_exc(file=sys.stderr)
+            sys.stderr.write(f"{PROG}: error: {_error_line(err)}\n")
+            return EXIT_ERROR
+        logger.info("done in %.1f s; report: %s", time.perf_counter() - t0, report.resolve())
+    return EXIT_OK
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
