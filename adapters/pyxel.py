@@ -37,7 +37,7 @@ from .protocol import LevelRecord, reduced_basis
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PyxelAdapter", "SplineLevelTooFineError", "pyxel_basis", "project_on_basis", "spline_for_mesh",
+__all__ = ["PyxelAdapter", "independent_columns", "pyxel_basis", "project_on_basis", "spline_for_mesh",
            "correlate_multilevel", "correlate_fe", "import_pyxel"]
 
 _EXTRA_HINT = ('the pyxel adapter needs pyxel-dic (PyPI "pyxel-dic", import "pyxel"); '
@@ -156,27 +156,27 @@ def spline_for_mesh(m: Any, margin: float = 0.0, degree: int = 2,
     return SplinePatch(degrees=(p, p), knots=knots, control_points=control)
 
 
-class SplineLevelTooFineError(ValueError):
-    """A spline level has more (independent) basis functions than the mesh can carry."""
+def independent_columns(B: sps.csr_matrix, rtol: float = 1e-9) -> np.ndarray:
+    """Indices of a maximal set of linearly independent columns of ``B`` (n_dof, k).
 
+    A fine spline level can have more functions than a coarse or uneven legacy mesh can
+    tell apart at its nodes (e.g. spans cut by a hole); ``B^T H B`` is then singular.
+    The range of ``B`` (the displacements it can give) is kept, with a column-pivoted
+    QR (LAPACK geqp3 via scipy) choosing the columns; ``rtol`` is relative to ``|R_00|``.
+    """
+    import scipy.linalg as sla
 
-def _check_full_rank(B: sps.csr_matrix, level: int) -> None:
-    """Raise if ``B`` (n_dof, k) has not full column rank: ``B^T H B`` would be singular."""
-    n_dof_seen = int(np.count_nonzero(B.getnnz(axis=1)))
-    if B.shape[1] > n_dof_seen:
-        raise SplineLevelTooFineError(
-            f"spline level {level} has {B.shape[1]} basis functions for {n_dof_seen} FE "
-            "dofs: it is finer than the mesh; use fewer levels or a coarser patch")
-    try:
-        diag = np.abs(spla.splu(sps.csc_matrix(B.T @ B)).U.diagonal())
-    except RuntimeError as exc:  # exactly singular
-        diag = np.zeros(1)
-        logger.debug("Gram matrix of level %d: %s", level, exc)
-    if diag.min() <= 1e-12 * diag.max():
-        raise SplineLevelTooFineError(
-            f"spline level {level}: its {B.shape[1]} basis functions are not linearly "
-            "independent at the FE nodes (too few nodes in some spline spans); use "
-            "fewer levels or a coarser patch")
+    gram = (B.T @ B).tocsc()
+    try:  # cheap test first: a sparse LU of the Gram matrix
+        diag = np.abs(spla.splu(gram).U.diagonal())
+        if diag.min() > 1e-8 * diag.max():  # clearly regular: no QR needed
+            return np.arange(B.shape[1])
+    except RuntimeError:  # exactly singular
+        pass
+    _, R, pivots = sla.qr(B.toarray(), mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    rank = int(np.count_nonzero(d > rtol * d[0]))
+    return np.sort(pivots[:rank])
 
 
 class PyxelAdapter:
@@ -295,7 +295,12 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
         level = n_levels - 1 - k  # Eq. 28 numbering: 0 is the finest
         B = reduced_basis(space.operators[level], adapter.dof_layout[used], adapter.n_dof)
         B = B[:, np.flatnonzero(B.getnnz(axis=0))].tocsr()  # functions seen by no node
-        _check_full_rank(B, level)
+        keep = independent_columns(B)  # B^T H B must be regular
+        if keep.size < B.shape[1]:
+            logger.warning("spline level %d: %d of %d basis functions are linearly "
+                           "dependent at the FE nodes; kept %d", level,
+                           B.shape[1] - keep.size, B.shape[1], keep.size)
+            B = B[:, keep].tocsr()
         U_start = project_on_basis(B, U)  # pyxel restricts the updates only
         U, residual_std, n_it = adapter.correlate(B, U_start, scale)  # Eqs. 18-21
         logger.info("spline level %d (%d basis functions) at image scale %d: residual "

@@ -133,9 +133,14 @@ def test_spline_regularization_beats_plain_pyxel_on_noisy_images(speckle_pair, t
     assert std_s <= std_true * (1.0 + 1e-3)
 
 
-def test_a_spline_level_finer_than_the_mesh_is_refused(speckle_pair):
-    f, g = speckle_pair
-    m, cam = roi_mesh(3)  # 22 x 22 elements
-    patch = adapter.spline_for_mesh(m, degree=2, elements=(6, 6))
-    with pytest.raises(adapter.SplineLevelTooFineError, match="level 0"):
-        adapter.correlate_multilevel(f, g, m, cam, patch, n_levels=3, scales=(0, 0, 0))
+def test_dependent_columns_are_dropped_and_the_range_kept():
+    rng = np.random.default_rng(3)
+    B0 = sps.random(40, 6, density=0.5, random_state=4, format="csr") + sps.eye(40, 6)
+    mix = sps.csr_matrix(rng.standard_normal((6, 3)))
+    B = sps.hstack([B0, B0 @ mix]).tocsr()  # 9 columns, rank 6
+    keep = adapter.independent_columns(B)
+    assert keep.size == 6 and np.linalg.matrix_rank(B[:, keep].toarray()) == 6
+    for column in B.T.toarray():  # every original column is in the kept range
+        np.testing.assert_allclose(adapter.project_on_basis(B[:, keep], column), column,
+                                   atol=1e-8)
+    np.testing.assert_array_equal(adapter.independent_columns(B0), np.arange(6))
