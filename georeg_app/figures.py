@@ -56,7 +56,7 @@ def bfp_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.array([e1, np.cross(n, e1), n])
 
 
-def nice_scale_factor(extent_mm: float, max_distance_mm: float, fraction: float = 0.1) -> float:
+def nice_scale_factor(extent_mm: float, max_distance_mm: float, fraction: float = 0.2) -> float:
     """Deformation scale factor (1, 2 or 5 x 10^k) making the largest distance to the BFP
     about ``fraction`` of the specimen extent."""
     if max_distance_mm <= 0 or not np.isfinite(max_distance_mm):
@@ -138,7 +138,8 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
         percent = np.asarray(m.residual.percent, float)
         seen = np.isfinite(percent)
         fields.append((((X - centre) @ axes.T)[seen, :2], percent[seen]))
-    all_uv = np.concatenate([uv for uv, _ in fields])
+    all_uv = np.concatenate([uv for uv, _ in fields]
+                            + [((np.asarray(results[0].measurement.nodes, float) - centre) @ axes.T)[:, :2]])
     lo, hi = all_uv.min(axis=0), all_uv.max(axis=0)
     span = np.maximum(hi - lo, 1e-9)
     n_points = min(len(p) for _, p in fields) or 1      # about 2 points per cell at most

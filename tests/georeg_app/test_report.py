@@ -73,5 +73,6 @@ def test_bfp_frame_and_scale_factor():
     centre, axes = figures.bfp_frame(pts @ R.T + [1.0, 2.0, 3.0])
     np.testing.assert_allclose(axes @ axes.T, np.eye(3), atol=1e-12)
     np.testing.assert_allclose(axes[2], R[:, 2], atol=1e-12)            # normal of the tilted plane
-    assert figures.nice_scale_factor(100.0, 1.0) == 10.0
-    assert figures.nice_scale_factor(100.0, 0.3) == 20.0                # 33.3 -> 20
+    assert figures.nice_scale_factor(100.0, 1.0, fraction=0.1) == 10.0
+    assert figures.nice_scale_factor(100.0, 0.3, fraction=0.1) == 20.0  # 33.3 -> 20
+    assert figures.nice_scale_factor(100.0, 1.0) == 20.0                # default: 20 % of the extent
