@@ -73,19 +73,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# loggers shown from this level only, unless --verbose
+_CHATTY = {"matplotlib": logging.INFO, "PIL": logging.INFO,
+           "fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+
+
 @contextlib.contextmanager
 def _logging_to_stderr(quiet: bool, verbose: bool):
     """Log to stderr at the level of --quiet/--verbose for the duration of a command."""
     level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
-    root, quiet_loggers = logging.getLogger(), ("matplotlib", "PIL")
+    root, quiet_loggers = logging.getLogger(), tuple(_CHATTY)
     saved = root.level, [logging.getLogger(n).level for n in quiet_loggers]
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s" if verbose
                                            else f"{PROG}: %(message)s"))
     root.addHandler(handler)
     root.setLevel(level)
-    for name in quiet_loggers:            # third-party chatter stays out of the way
-        logging.getLogger(name).setLevel(max(level, logging.INFO))
+    if not verbose:                       # chatter (e.g. staged file names) stays out of the way
+        for name, floor in _CHATTY.items():
+            logging.getLogger(name).setLevel(max(level, floor))
     try:
         yield
     finally:
@@ -111,7 +117,7 @@ def measure_specs(config: Config) -> list:
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
-    from .outputs import REPORT_FILE, write_all
+    from .outputs import REPORT_FILE, summary_dict, write_all
     from .pipeline import default_specs, demo_config, run_methods
 
     progress = not args.quiet
@@ -126,8 +132,12 @@ def _run(args: argparse.Namespace) -> Path:
         specs = default_specs(config) if args.command == "compare" else measure_specs(config)
     logger.info("%s: %d method(s): %s", args.command, len(specs), ", ".join(s.label for s in specs))
     run = run_methods(config, specs, images=images, truth=truth, progress=progress)
-    paths = write_all(out, run)
-    logger.info("wrote %d files in %s", len(paths), out)
+    for m in summary_dict(run)["methods"]:
+        error = "n/a" if m["shape_rms_error_mm"] is None else f"{m['shape_rms_error_mm']:.4f} mm"
+        logger.info("%-24s residual %.3f%%, RMS dist. to BFP %.4f mm, error vs truth %s, "
+                    "%d iterations, %.1f s", m["label"], m["residual_percent"],
+                    m["distance_to_bfp_rms_mm"], error, m["iterations"], m["time_s"])
+    write_all(out, run)
     return Path(out) / REPORT_FILE
 
 
