@@ -149,8 +149,11 @@ class Camera:
         D[:, 0, 1] = drad * x * y + 2.0 * p1 * x + 2.0 * p2 * y
         D[:, 1, 0] = drad * x * y + 2.0 * p1 * x + 2.0 * p2 * y
         D[:, 1, 1] = radial + drad * y * y + 6.0 * p1 * y + 2.0 * p2 * x
-        A = K[:2, :2]                                             # [[fx, s], [0, fy]]
-        return uv, np.einsum("ab,nbc->nac", A, D)
+        fx, skew, fy = K[0, 0], K[0, 1], K[1, 1]                 # A = [[fx, s], [0, fy]]
+        AD = np.empty_like(D)
+        AD[:, 0, :] = fx * D[:, 0, :] + skew * D[:, 1, :]
+        AD[:, 1, :] = fy * D[:, 1, :]
+        return uv, AD
 
     def _project_camera_frame(self, Xc: np.ndarray, with_jacobian: bool):
         """Pixels of camera-frame points (n, 2) and d(u, v)/d x_cam (n, 2, 3)."""
@@ -159,11 +162,13 @@ class Camera:
         uv, D = self._distort(xn, with_jacobian)
         if not with_jacobian:
             return uv, None
-        dn = np.zeros((len(z), 2, 3))                             # d(x', y')/d x_cam
-        dn[:, 0, 0] = 1.0 / z
-        dn[:, 1, 1] = 1.0 / z
-        dn[:, :, 2] = -xn / z[:, None]
-        return uv, np.einsum("nab,nbc->nac", D, dn)
+        # d(x', y')/d x_cam = [[1/z, 0, -x'/z], [0, 1/z, -y'/z]], applied to D explicitly
+        inv_z = (1.0 / z)[:, None]
+        J = np.empty((len(z), 2, 3))
+        J[:, :, 0] = D[:, :, 0] * inv_z
+        J[:, :, 1] = D[:, :, 1] * inv_z
+        J[:, :, 2] = -(J[:, :, 0] * xn[:, :1] + J[:, :, 1] * xn[:, 1:])
+        return uv, J
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """Project world points ``X`` (n, 3) mm to pixels (n, 2)."""
@@ -172,7 +177,7 @@ class Camera:
     def project_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (n, 2) and the derivative ``dx/dX`` (n, 2, 3) px/mm."""
         uv, Jc = self._project_camera_frame(self.to_camera(X), True)
-        return uv, Jc @ self.R
+        return uv, (Jc.reshape(-1, 3) @ self.R).reshape(-1, 2, 3)
 
     def extrinsic_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (n, 2) and the derivative ``dx/dp`` (n, 2, 6), ``p = [rvec, tvec]``."""

@@ -40,6 +40,12 @@ class MeasurementSettings:
 
     scales : image scales coarse to fine, e.g. (2, 1, 0); 0 is the full resolution.
     calibrate : run the fixed point with calibration of the extrinsics (Eq. 6).
+    tol_mm, fixed_point_tol_mm : stagnation of q at scale 0 (mm); at scale s they are
+        multiplied by 2**s (a coarse pixel is 2**s fine pixels).
+    fixed_point_tol_px : stagnation of the poses: largest shift of the projected nodes
+        between two fixed-point iterations, in pixels of the current scale.
+    fixed_point_rtol : the fixed point also stops when the residual changes by less
+        than this fraction between two iterations.
     keep_stereo : when calibrating, keep the stereo relation of the initial cameras
         (6 unknowns) instead of freeing both cameras (12 unknowns).
     """
@@ -52,7 +58,8 @@ class MeasurementSettings:
     max_iter: int = 20
     tol_mm: float = 1e-4
     fixed_point_tol_mm: float = 2e-3
-    fixed_point_tol_px: float = 5e-3
+    fixed_point_tol_px: float = 1e-2
+    fixed_point_rtol: float = 1e-4
     points_per_px: float = 1.0
     progress: bool = False
 
@@ -131,6 +138,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
         node_weights = quad.L.T @ quad.weight_mm2
         mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
+        coarse = 2.0 ** scale
+        previous_residual = np.inf
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -143,7 +152,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                 cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
                 scaled = [c.scaled(scale) for c in cams]
             shape = shape_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
-                                       settings.normalisation, settings.max_iter, settings.tol_mm,
+                                       settings.normalisation, settings.max_iter,
+                                       settings.tol_mm * coarse,
                                        log=log, extra_mask=mask, context=context)
             q = shape.q
             total_iterations += shape.iterations
@@ -164,7 +174,10 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             dp = _projected_shift_px([c.scaled(scale) for c in cams_before], scaled, X_nodes)
             logger.info("scale %d fixed point %d: residual %.3f%%, max|dq| %.2e mm, pose shift %.2e px",
                         scale, fp, shape.residual.std_percent, dq, dp)
-            if dq < settings.fixed_point_tol_mm and dp < settings.fixed_point_tol_px:
+            residual = shape.residual.std_percent
+            stagnant = abs(previous_residual - residual) <= settings.fixed_point_rtol * residual
+            previous_residual = residual
+            if (dq < settings.fixed_point_tol_mm * coarse and dp < settings.fixed_point_tol_px) or stagnant:
                 break
         else:
             if settings.calibrate:

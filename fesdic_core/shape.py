@@ -78,14 +78,15 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
                        max_iter: int = 20, tol_mm: float = 1e-4, divergence_window: int = 3,
+                       divergence_rtol: float = 1e-3,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
                        on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
-    Stops when ``max |d| < tol_mm`` (q stagnates). If the residual grows for
-    ``divergence_window`` consecutive iterations, stops and returns the best state
-    with ``diverged=True``.
+    Stops when ``max |d| < tol_mm`` (q stagnates). If the residual grows (by more than
+    ``divergence_rtol``, relative) for ``divergence_window`` consecutive iterations, stops
+    and returns the best state with ``diverged=True``.
     """
     q = q0.copy()
     best_q, best_res, best_std = q.copy(), None, np.inf
@@ -97,7 +98,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         std = res.std_percent
         if std < best_std:
             best_q, best_res, best_std = q.copy(), res, std
-        rising = rising + 1 if std > previous else 0
+        rising = rising + 1 if std > previous * (1.0 + divergence_rtol) else 0
         previous = std
         if rising >= divergence_window:
             diverged = True

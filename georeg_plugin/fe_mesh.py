@@ -13,8 +13,9 @@ The local axes of every element are ``(xi, eta) = (u, v)``, so the FE normal
 ``x_xi x x_eta`` has the direction of the spline normal ``S_u x S_v``.
 
 A closed patch (``plate_with_hole``: ``u = 0`` and ``u = 1`` are the same line) gives
-coincident but distinct nodes along that seam, as the spline has distinct dofs there;
-gluing them needs the matching gluing of the spline dofs of every level.
+coincident nodes along that seam: they are welded (the node of smaller index is kept,
+with its parameters), so the mesh is conforming; ``multilevel_space`` glues the
+matching spline dofs of every level.
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ import dataclasses
 import logging
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from .patch import SplinePatch
 
@@ -95,7 +97,19 @@ def _parametric_grid(b: np.ndarray, per_span: int) -> np.ndarray:
     return np.append(inner, b[-1])
 
 
-def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9") -> SplineFEMesh:
+def coincident_groups(points: np.ndarray, tol: float) -> np.ndarray:
+    """Representative index (n,) of each point: the smallest index within ``tol`` of it."""
+    representative = np.arange(len(points))
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")
+    if pairs.size:
+        pairs = np.sort(pairs, axis=1)
+        order = np.argsort(pairs[:, 1])
+        np.minimum.at(representative, pairs[order, 1], pairs[order, 0])
+        representative = representative[representative]        # chains a-b-c -> a
+    return representative
+
+
+def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9", weld: bool = True) -> SplineFEMesh:
     """FE mesh with one element per Bezier element of ``patch``, nodes on the spline.
 
     Parameters
@@ -105,7 +119,8 @@ def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9") -> SplineFEMesh:
 
     Returns
     -------
-    SplineFEMesh with ``nodes = patch.evaluate(uv)`` (Eqs. 17, 27).
+    SplineFEMesh with ``nodes = patch.evaluate(uv)`` (Eqs. 17, 27); with ``weld``,
+    coincident nodes (the seam of a closed patch) are merged.
     """
     if family not in _FAMILIES:
         raise ValueError(f"family must be one of {sorted(_FAMILIES)}, got {family!r}")
@@ -121,6 +136,16 @@ def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9") -> SplineFEMesh:
     b = ev.ravel()[:, None] + local[None, :, 1]
     connectivity = a * n_cols + b
     nodes = patch.evaluate(uv)  # Eq. 17 / Eq. 27: x_FE = x_LAG
+    if weld:
+        size = float(np.ptp(nodes, axis=0).max()) or 1.0
+        representative = coincident_groups(nodes, 1e-9 * size)
+        kept = np.unique(representative)
+        if kept.size < len(nodes):
+            renumber = np.full(len(nodes), -1)
+            renumber[kept] = np.arange(kept.size)
+            connectivity = renumber[representative[connectivity]]
+            nodes, uv = nodes[kept], uv[kept]
+            logger.debug("welded %d coincident nodes", len(representative) - kept.size)
     logger.debug("%s mesh from spline: %d elements, %d nodes", family,
                  len(connectivity), len(nodes))
     return SplineFEMesh(nodes=nodes, connectivity=connectivity, cell_type=cell_type, uv=uv)

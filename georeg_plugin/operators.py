@@ -29,6 +29,7 @@ import logging
 import numpy as np
 import scipy.sparse as sps
 
+from .fe_mesh import coincident_groups
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
 
@@ -127,12 +128,18 @@ class MultilevelSpace:
         (Eq. 28 numbering): ``operators[s]`` belongs to ``patches[-1 - s]``.
     refinement : tuple of csr ``C_r`` with ``refinement[s]`` (n_spline_{s+1},
         n_spline_s) mapping level ``s`` to the coarser level ``s + 1``:
-        ``R^{s+1} = refinement[s] R^s`` (Eq. 13), ``C_{s+1} = refinement[s] C_s``.
+        ``R^{s+1} = refinement[s] R^s`` (Eq. 13), ``C_{s+1} = refinement[s] C_s``
+        (empty when dofs are glued).
+    gluing : tuple of csr ``G_s`` (n_dofs_s, n_control_points_s), one per level (same
+        numbering as ``operators``), or empty: the dofs of a closed patch glue its
+        coincident control points (``C_s = G_s C_s^patch``); the values of the control
+        points of level ``s`` are ``G_s^T q_s``.
     """
 
     patches: tuple
     operators: tuple
     refinement: tuple = ()
+    gluing: tuple = ()
 
     def __post_init__(self) -> None:
         ops = tuple(sps.csr_matrix(C) for C in self.operators)
@@ -172,10 +179,28 @@ class MultilevelSpace:
         """The spline patch of a level (``0`` = finest)."""
         return self.patches[-1 - level]
 
+    def control_point_values(self, q_s: np.ndarray, level: int) -> np.ndarray:
+        """Values (n_control_points,) of the level's control points from its dofs ``q_s``."""
+        return q_s if not self.gluing else self.gluing[level].T @ q_s
+
+
+def gluing_matrix(patch: SplinePatch, tol: float = 1e-9) -> sps.csr_matrix:
+    """``G`` (n_dofs, n_control_points) summing coincident control points into one dof.
+
+    Coincident control points (same position and weight) are those of the seam of a closed
+    patch; a dof moving them together keeps the surface continuous across the seam.
+    """
+    cp = patch.control_points.reshape(-1, 3)
+    w = patch.weights.reshape(-1, 1) if patch.weights is not None else np.ones((len(cp), 1))
+    size = float(np.ptp(cp, axis=0).max()) or 1.0
+    representative = coincident_groups(np.hstack([cp, w * size]), tol * size)
+    kept, dof = np.unique(representative, return_inverse=True)
+    return sps.csr_matrix((np.ones(len(cp)), (dof, np.arange(len(cp)))), shape=(kept.size, len(cp)))
+
 
 def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray,
                      node_normals: np.ndarray | None = None,
-                     uv: np.ndarray | None = None) -> MultilevelSpace:
+                     uv: np.ndarray | None = None, glue: bool = True) -> MultilevelSpace:
     """Levels by dyadic refinement of ``coarse_patch``, operators by node evaluation.
 
     Parameters
@@ -189,7 +214,9 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     Returns
     -------
     MultilevelSpace. Without normals, ``C_s`` equals the product form of Eq. 28
-    (``C_{s+1} = C_r C_s``) to round-off, for B-splines and NURBS alike.
+    (``C_{s+1} = C_r C_s``) to round-off, for B-splines and NURBS alike. With ``glue``,
+    coincident control points (the seam of a closed patch) share one dof per level; the
+    glued levels stay nested (boundary dofs refine one to one).
     """
     if int(n_levels) < 1:
         raise ValueError(f"n_levels must be >= 1, got {n_levels}")
@@ -201,7 +228,13 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     if uv is None:
         uv, _ = node_parameters(patches[-1], nodes)
     operators = [extraction_operator(p, uv, node_normals) for p in reversed(patches)]
+    gluing = [gluing_matrix(p) for p in reversed(patches)] if glue else []
+    if gluing and all(G.shape[0] == G.shape[1] for G in gluing):
+        gluing = []                                              # nothing to glue
+    if gluing:
+        operators = [(G @ C).tocsr() for G, C in zip(gluing, operators)]
+        refinements = []
     logger.info("multilevel space: %d levels, spline dofs %s, %d FE nodes", n_levels,
                 [C.shape[0] for C in operators], np.asarray(uv).shape[0])
     return MultilevelSpace(patches=tuple(patches), operators=tuple(operators),
-                           refinement=tuple(reversed(refinements)))
+                           refinement=tuple(reversed(refinements)), gluing=tuple(gluing))

@@ -17,8 +17,9 @@ def knot_vectors(draw, degrees=(1, 4)):
     n_int = draw(st.integers(0, 5))
     cuts = np.sort(draw(st.lists(st.floats(0.05, 0.95), min_size=n_int, max_size=n_int,
                                  unique=True)))
-    mult = draw(st.lists(st.integers(1, p), min_size=n_int, max_size=n_int))
-    interior = np.repeat(a + length * cuts, mult)
+    values = np.unique(a + length * cuts)          # distinct after rounding too
+    mult = draw(st.lists(st.integers(1, p), min_size=values.size, max_size=values.size))
+    interior = np.repeat(values, mult)
     t = np.r_[np.full(p + 1, a), interior, np.full(p + 1, a + length)]
     return t, p
 

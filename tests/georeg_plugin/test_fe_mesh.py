@@ -47,7 +47,7 @@ def q9_area(mesh):
 
 def test_q9_nodes_lie_on_the_spline_and_hole_is_exact():
     patch, _ = refine_uniform(plate_with_hole(L, W, R), 2)
-    mesh = fe_mesh_from_spline(patch, "Q9")
+    mesh = fe_mesh_from_spline(patch, "Q9", weld=False)
     nu_el, nv_el = patch.n_elements
     assert mesh.cell_type == "quad9"
     assert mesh.connectivity.shape == (nu_el * nv_el, 9)
@@ -67,7 +67,7 @@ def test_q9_nodes_lie_on_the_spline_and_hole_is_exact():
 
 def test_q9_node_order_follows_gmsh_in_parameter_space():
     patch, _ = refine_uniform(plate_with_hole(L, W, R), 1)
-    mesh = fe_mesh_from_spline(patch, "Q9")
+    mesh = fe_mesh_from_spline(patch, "Q9", weld=False)
     uv = mesh.uv[mesh.connectivity]                       # (ne, 9, 2)
     centre = uv[:, 8:9, :]
     half = 0.5 * (uv[:, 2:3, :] - uv[:, 0:1, :])
@@ -114,8 +114,8 @@ def test_rectangle_area_is_exact_and_nodes_are_linear_in_uv():
 
 def test_q4_mesh_has_the_q9_corners():
     patch, _ = refine_uniform(plate_with_hole(L, W, R), 1)
-    q9 = fe_mesh_from_spline(patch, "Q9")
-    q4 = fe_mesh_from_spline(patch, "Q4")
+    q9 = fe_mesh_from_spline(patch, "Q9", weld=False)
+    q4 = fe_mesh_from_spline(patch, "Q4", weld=False)
     nu_el, nv_el = patch.n_elements
     assert q4.cell_type == "quad"
     assert q4.nodes.shape == ((nu_el + 1) * (nv_el + 1), 3)
@@ -130,3 +130,17 @@ def test_mesh_is_frozen_and_bad_family_rejected():
         fe_mesh_from_spline(rectangle(L, W), "T6")
     m = mesh.to_meshio()
     assert m.cells[0].type == "quad9" and m.points.shape == mesh.nodes.shape
+
+
+def test_seam_of_the_closed_plate_is_welded():
+    """u = 0 and u = 1 are the same line: welding merges exactly those nodes (conforming mesh)."""
+    patch, _ = refine_uniform(plate_with_hole(L, W, R), 2)
+    open_mesh = fe_mesh_from_spline(patch, "Q9", weld=False)
+    welded = fe_mesh_from_spline(patch, "Q9")
+    seam = np.count_nonzero(open_mesh.uv[:, 0] == 1.0)
+    assert welded.n_nodes == open_mesh.n_nodes - seam
+    assert_allclose(welded.nodes[welded.connectivity], open_mesh.nodes[open_mesh.connectivity], atol=1e-12)
+    # no two nodes coincide any more, and every node is used
+    d = np.linalg.norm(welded.nodes[:, None] - welded.nodes[None], axis=-1) + np.eye(welded.n_nodes)
+    assert d.min() > 1e-6
+    assert np.array_equal(np.unique(welded.connectivity), np.arange(welded.n_nodes))

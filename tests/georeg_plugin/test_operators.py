@@ -59,7 +59,7 @@ def flat_bspline_space():
     coarse = _bumpy_bspline_rectangle()
     fine, _ = refine_uniform(coarse, 3)
     mesh = fe_mesh_from_spline(fine, "Q9")
-    return coarse, mesh, multilevel_space(coarse, 3, mesh.nodes, uv=mesh.uv)
+    return coarse, mesh, multilevel_space(coarse, 3, mesh.nodes, uv=mesh.uv, glue=False)
 
 
 def test_node_evaluation_equals_product_form_eq_28(flat_bspline_space):
@@ -78,7 +78,7 @@ def test_product_form_also_holds_for_nurbs():
     coarse = plate_with_hole(L, W, R)
     fine, _ = refine_uniform(coarse, 3)
     mesh = fe_mesh_from_spline(fine, "Q9")
-    space = multilevel_space(coarse, 3, mesh.nodes, uv=mesh.uv)
+    space = multilevel_space(coarse, 3, mesh.nodes, uv=mesh.uv, glue=False)
     for s in range(2):
         diff = abs(space.refinement[s] @ space.operators[s] - space.operators[s + 1])
         assert diff.max() < 1e-12
@@ -121,7 +121,7 @@ def _nurbs_interpolation_error(times, rng):
     """Max error of Eq. 27 (Q9 interpolant of C^T q vs R^T q), last level refined."""
     coarse = plate_with_hole(L, W, R)
     fine, C_r = refine_uniform(coarse, times)
-    mesh = fe_mesh_from_spline(fine, "Q9")
+    mesh = fe_mesh_from_spline(fine, "Q9", weld=False)
     C = extraction_operator(fine, mesh.uv)
     q_c = np.sin(np.arange(coarse.n_dofs))          # one fixed smooth field...
     q_f = C_r.T @ q_c                                # ...on the refined level (Eq. 15)
@@ -174,7 +174,7 @@ def test_legacy_mesh_reproduces_a_smooth_offset_better_with_refinement(tmp_path)
         nodes = meshio.read(path).points
         uv, distance = node_parameters(coarse, nodes)
         assert distance.max() < 1e-8
-        space = multilevel_space(coarse, levels, nodes, uv=uv)
+        space = multilevel_space(coarse, levels, nodes, uv=uv, glue=False)
         reg = GeometricRegularization(space)
         q = offset(nodes)
         q_s = reg.control_values(q, 0)                  # least squares in range(C^T)
@@ -225,3 +225,24 @@ def test_bad_inputs_are_rejected():
         extraction_operator(patch, np.zeros((4, 2)), node_normals=np.zeros((3, 3)))
     with pytest.raises(ValueError, match="n_levels"):
         multilevel_space(patch, 0, np.zeros((4, 3)))
+
+
+def test_glued_levels_are_continuous_across_the_seam_and_nested():
+    """Closed plate: coincident control points share a dof; levels stay nested."""
+    coarse = plate_with_hole(L, W, R)
+    fine, _ = refine_uniform(coarse, 3)
+    mesh = fe_mesh_from_spline(fine, "Q9")                     # welded seam
+    space = multilevel_space(coarse, 3, mesh.nodes, uv=mesh.uv)
+    assert space.gluing and space.gluing[-1].shape == (coarse.n_dofs - 3, coarse.n_dofs)
+    for s in range(space.n_levels - 1):
+        fine_op, coarse_op = space.operators[s], space.operators[s + 1]
+        X, *_ = np.linalg.lstsq(fine_op.T.toarray(), coarse_op.T.toarray(), rcond=None)
+        assert np.abs(fine_op.T @ X - coarse_op.T).max() < 1e-10
+    # a glued field evaluated on both sides of the seam (u = 0 and u = 1) agrees
+    rng = np.random.default_rng(2)
+    q_s = rng.standard_normal(space.operators[-1].shape[0])
+    ctrl = space.control_point_values(q_s, space.n_levels - 1)
+    v = rng.uniform(0, 1, 20)
+    left = coarse.basis(np.column_stack([np.zeros(20), v])) @ ctrl
+    right = coarse.basis(np.column_stack([np.ones(20), v])) @ ctrl
+    assert_allclose(left, right, atol=1e-12)
