@@ -7,11 +7,11 @@ camera 0 only (camera 1 follows). The residual is the same as the shape's (Eq. 3
     dr/dp0 = grad f0^T dx0/dp0,    dr/dp1 = -grad f1^T dx1/dp1,
     M dp = -sum_g w_g G_g r_g,     M = sum_g w_g G_g G_g^T.
 
-Some pose directions are not seen by the gray levels (sliding a flat specimen in its
-own plane changes neither image). The step is therefore taken in the well-determined
-subspace only: ``M`` is Jacobi-scaled and inverted on its eigenvectors whose eigenvalue
-exceeds ``rcond`` times the largest, so unobservable directions keep their initial value
-(the landmark pose) instead of drifting with noise.
+Some pose directions are not seen by the gray levels: sliding the specimen in its own
+surface changes neither image. The driver passes them as ``frozen`` directions and the
+step is taken orthogonally to them (in Jacobi-scaled parameters), so they keep their
+initial value (the landmark pose) instead of drifting with noise; what is left is
+solved on the eigenvectors of the scaled ``M`` above ``rcond`` times the largest.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import null_space
 
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
@@ -36,13 +37,20 @@ class CalibrationResult:
     converged: bool
 
 
-def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float) -> np.ndarray:
-    """Solve ``M x = rhs`` on the eigen-subspace of the Jacobi-scaled ``M`` above ``rcond``."""
+def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
+                    frozen: np.ndarray | None = None) -> np.ndarray:
+    """Solve ``M x = rhs`` orthogonally to ``frozen`` (n, k), on eigenvalues above ``rcond``.
+
+    Both in Jacobi-scaled variables ``y = sqrt(diag M) x``.
+    """
     scale = np.sqrt(np.maximum(np.diag(M), np.finfo(float).tiny))
     Ms = M / np.outer(scale, scale)
-    values, vectors = np.linalg.eigh(Ms)
+    Z = np.eye(len(M))
+    if frozen is not None and frozen.size:
+        Z = null_space((frozen * scale[:, None]).T)             # complement of the gauge
+    values, vectors = np.linalg.eigh(Z.T @ Ms @ Z)
     keep = values > rcond * values.max()
-    y = vectors[:, keep] @ ((vectors[:, keep].T @ (rhs / scale)) / values[keep])
+    y = Z @ (vectors[:, keep] @ ((vectors[:, keep].T @ (Z.T @ (rhs / scale))) / values[keep]))
     return y / scale
 
 
@@ -58,8 +66,9 @@ def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | N
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
-                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-6,
-                         extra_mask=None, log=None, context: dict | None = None) -> CalibrationResult:
+                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
+                         frozen: np.ndarray | None = None, extra_mask=None, log=None,
+                         context: dict | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
 
     Parameters
@@ -67,6 +76,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     stereo : (R, t), optional
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
+    frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     """
     cams = list(cameras)
     converged, it = False, 0
@@ -76,7 +86,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         G = _parameter_gradients(res, D)
         w = np.where(res.mask, quad.weight_mm2, 0.0)
         M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
-        dp = truncated_solve(M, -(G.T @ (w * res.r)), rcond)
+        dp = truncated_solve(M, -(G.T @ (w * res.r)), rcond, frozen)
         if stereo is None:
             cams = [c.with_extrinsics(c.extrinsics + dp[6 * k:6 * k + 6]) for k, c in enumerate(cams)]
         else:

@@ -22,7 +22,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .calibration import calibrate_extrinsics
-from .gauge import transfer_rigid_part
+from .gauge import pose_directions, tangential_motions, transfer_rigid_part
 from .image import Image, pyramid
 from .mesh import SurfaceMesh, node_normals
 from .quadrature import PixelQuadrature, pixel_quadrature
@@ -92,6 +92,34 @@ class Measurement:
         return self.residual.std_percent
 
 
+class MeasurementInputError(ValueError):
+    """Inputs of a measurement that do not fit together (sizes, visibility)."""
+
+
+def check_inputs(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence) -> None:
+    """Raise :class:`MeasurementInputError` naming the image or camera at fault."""
+    if len(images) != 2 or len(cameras) != 2:
+        raise MeasurementInputError(f"a stereo pair needs 2 images and 2 cameras, got "
+                                    f"{len(images)} and {len(cameras)}")
+    if images[0].shape != images[1].shape:
+        raise MeasurementInputError(
+            f"images of different sizes in one stereo pair: {images[0].source} is "
+            f"{images[0].shape[1]} x {images[0].shape[0]} px, {images[1].source} is "
+            f"{images[1].shape[1]} x {images[1].shape[0]} px")
+    for image, cam in zip(images, cameras):
+        w, h = cam.image_size
+        if (h, w) != tuple(image.shape):
+            raise MeasurementInputError(
+                f"{image.source}: image is {image.shape[1]} x {image.shape[0]} px but camera "
+                f"{cam.name} expects {w} x {h} px")
+        x = cam.project(mesh.nodes)
+        seen = cam.in_front(mesh.nodes) & image.inside(x)
+        if not np.any(seen):
+            raise MeasurementInputError(
+                f"mesh {mesh.name!r} projects entirely outside {image.source} (camera {cam.name}): "
+                "check the camera poses (landmarks) and the mesh units (mm)")
+
+
 def _projected_shift_px(cameras_a, cameras_b, X: np.ndarray) -> float:
     return max(float(np.max(np.linalg.norm(a.project(X) - b.project(X), axis=1)))
                for a, b in zip(cameras_a, cameras_b))
@@ -120,6 +148,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     DivergenceError
         If a Gauss-Newton diverged; ``err.best`` is the best Measurement reached.
     """
+    check_inputs(mesh, images, cameras)
     solver = DirectSolver() if solver is None else solver
     normals = node_normals(mesh) if normals is None else normals
     q = np.zeros(mesh.nodes.shape[0]) if q0 is None else np.asarray(q0, float).copy()
@@ -137,6 +166,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         nodes_now = current_nodes(mesh.nodes, normals, q)
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
         node_weights = quad.L.T @ quad.weight_mm2
+        slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
         coarse = 2.0 ** scale
         previous_residual = np.inf
@@ -145,7 +175,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             q_before, cams_before = q.copy(), list(cams)
             if settings.calibrate:
                 X = quad.points(current_nodes(mesh.nodes, normals, q))
-                cal = calibrate_extrinsics(X, quad, imgs, scaled, stereo=stereo,
+                frozen = pose_directions(cams, slides, centre, stereo is not None)
+                cal = calibrate_extrinsics(X, quad, imgs, scaled, stereo=stereo, frozen=frozen,
                                            normalisation=settings.normalisation,
                                            max_iter=settings.max_iter, extra_mask=mask,
                                            log=log, context={**context, "scale": scale})

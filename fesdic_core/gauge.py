@@ -5,7 +5,10 @@ A rigid motion of the specimen changes the normal correction by
 the residual cannot tell them apart (section 2.2). When the poses are calibrated, the
 core keeps ``q`` orthogonal to these rigid normal modes (weighted by nodal areas) and
 hands the rigid part to the camera extrinsics after each shape solve. On a flat
-nominal surface these modes are the uniform offset and the two tilts. The shape is
+nominal surface these modes are the uniform offset and the two tilts. The rigid motions
+that slide the surface in itself (in-plane translations and rotation of a plate) change
+neither q nor the gray levels: the calibration keeps them fixed at their initial (landmark)
+value, see :func:`tangential_motions` and :func:`pose_directions`. The shape is
 reported also as "distance to best-fit plane", as the paper does.
 """
 from __future__ import annotations
@@ -55,6 +58,34 @@ def transfer_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
     """Remove the rigid normal part from ``q`` and give it to the camera poses."""
     q_rigid, coef, centre = split_rigid_part(q, nodes, normals, node_weights)
     return q - q_rigid, move_cameras_with_specimen(cameras, coef[:3], coef[3:], centre)
+
+
+def tangential_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray,
+                       rtol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid motions ``[t, w]`` (6, k) that slide the surface in itself, and the centre.
+
+    They are the (near) null space of the rigid normal modes: no node moves along its
+    normal, so the gray levels cannot see them (k = 3 on a plane, 2 on a cylinder).
+    """
+    modes, centre = rigid_normal_modes(nodes, normals)
+    # metres and radians on a comparable footing: rotations times the surface radius
+    radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=node_weights)))
+    scale = np.r_[np.ones(3), np.full(3, radius)]
+    _, sv, vt = np.linalg.svd(modes / scale * np.sqrt(node_weights)[:, None], full_matrices=True)
+    sv = np.r_[sv, np.zeros(6 - sv.size)]
+    return (vt[sv <= rtol * sv.max()] / scale).T, centre
+
+
+def pose_directions(cameras, motions: np.ndarray, centre: np.ndarray, keep_stereo: bool,
+                    step: float = 1e-6) -> np.ndarray:
+    """Extrinsic parameter directions (6 or 12, k) produced by rigid specimen motions."""
+    columns = []
+    for m in motions.T:
+        plus = move_cameras_with_specimen(cameras, step * m[:3], step * m[3:], centre)
+        minus = move_cameras_with_specimen(cameras, -step * m[:3], -step * m[3:], centre)
+        d = np.concatenate([(a.extrinsics - b.extrinsics) / (2 * step) for a, b in zip(plus, minus)])
+        columns.append(d[:6] if keep_stereo else d)
+    return np.array(columns).T.reshape(6 if keep_stereo else 12, -1)
 
 
 def best_fit_plane_distance(points: np.ndarray) -> np.ndarray:

@@ -1,0 +1,103 @@
+"""Glue between the geometric regularization plugin and our FE-SDIC core.
+
+The core exposes one extension point, the linear solve of each Gauss-Newton step
+(:class:`fesdic_core.solvers.StepSolver`); the plugin's
+:class:`georeg_plugin.solver.GeometricRegularization` has exactly that ``solve``
+method. This module only translates data between the two: the plugin's FE mesh of a
+spline into the core's :class:`~fesdic_core.mesh.SurfaceMesh`, the core's node normals
+into the plugin's operators, and the measured correction ``q`` back into a spline
+(Eq. 21). Neither package is changed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Mapping
+
+import numpy as np
+
+from fesdic_core.elements import family_from_meshio
+from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
+from georeg_plugin.fe_mesh import fe_mesh_from_spline
+from georeg_plugin.operators import MultilevelSpace, multilevel_space
+from georeg_plugin.patch import SplinePatch
+from georeg_plugin.refine import refine_uniform, refine_to_elements
+from georeg_plugin.solver import GeometricRegularization
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class NominalModel:
+    """The nominal geometry as both codes see it.
+
+    Attributes
+    ----------
+    patch : the coarsest spline of the nominal geometry (the CAD model).
+    mesh : the analysis-suitable FE mesh of the core (Eq. 17).
+    uv : (n, 2) parameters of the FE nodes on ``patch`` (None for a legacy mesh).
+    """
+
+    patch: SplinePatch
+    mesh: SurfaceMesh
+    uv: np.ndarray | None
+
+
+def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: str = "Q9",
+                  name: str = "nominal") -> NominalModel:
+    """FE mesh made from ``patch`` by knot insertion and Eq. 17, as a core mesh.
+
+    Parameters
+    ----------
+    patch : coarsest nominal spline.
+    elements : number of FE elements per parametric direction (tuple), or an integer
+        number of dyadic refinements of ``patch``.
+    family : "Q9" (the paper's choice) or "Q4".
+    """
+    if isinstance(elements, (int, np.integer)):
+        fine, _ = refine_uniform(patch, int(elements))
+    else:
+        fine, _ = refine_to_elements(patch, *elements)
+    fe = fe_mesh_from_spline(fine, family)
+    block = CellBlock(family=family_from_meshio(fe.cell_type), connectivity=fe.connectivity)
+    return NominalModel(patch=patch, mesh=SurfaceMesh(nodes=fe.nodes, blocks=(block,), name=name),
+                        uv=fe.uv)
+
+
+def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False) -> MultilevelSpace:
+    """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
+
+    ``curved`` weights ``C^T[I, J]`` by ``n_I . n_J`` (normals from the core), for nominal
+    surfaces that are not planar.
+    """
+    normals = node_normals(model.mesh) if curved else None
+    return multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
+                            uv=model.uv)
+
+
+def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,
+                  curved: bool = False) -> GeometricRegularization:
+    """The plugin's solve hook for the core: level ``schedule[scale]`` at each image scale.
+
+    By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
+    the paper's section 3.3), clipped to the coarsest level.
+    """
+    return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
+
+
+def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int = 0
+                    ) -> tuple[SplinePatch, np.ndarray]:
+    """The measured shape as a spline of ``level`` (Eq. 21): control points moved along normals.
+
+    Returns the patch and the control values ``q_s`` (mm along each control normal).
+    ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in the level's space.
+    """
+    space = solver.space
+    q_s = solver.control_values(q, level)
+    values = space.control_point_values(q_s, level)
+    patch = space.patch(level)
+    moved = patch.control_points + values.reshape(patch.control_points.shape[:2])[..., None] \
+        * patch.control_normals().reshape(patch.control_points.shape)
+    return dataclasses.replace(patch, control_points=moved), values
