@@ -67,6 +67,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
+                         residual_rtol: float = 1e-5,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
                          context: dict | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
@@ -77,11 +78,16 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
+    residual_rtol : also stop when the residual changes by less than this fraction.
     """
     cams = list(cameras)
-    converged, it = False, 0
+    converged, it, previous = False, 0, np.inf
     for it in range(1, max_iter + 1):
         res = gray_level_residual(X, quad, images, cams, normalisation, "extrinsic", extra_mask)
+        if abs(previous - res.std_percent) <= residual_rtol * res.std_percent:
+            converged = True
+            break
+        previous = res.std_percent
         D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
         G = _parameter_gradients(res, D)
         w = np.where(res.mask, quad.weight_mm2, 0.0)

@@ -179,6 +179,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                 cal = calibrate_extrinsics(X, quad, imgs, scaled, stereo=stereo, frozen=frozen,
                                            normalisation=settings.normalisation,
                                            max_iter=settings.max_iter, extra_mask=mask,
+                                           tol_rad=1e-7 * coarse, tol_mm=1e-5 * coarse,
                                            log=log, context={**context, "scale": scale})
                 cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
                 scaled = [c.scaled(scale) for c in cams]

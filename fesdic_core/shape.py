@@ -78,13 +78,14 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
                        max_iter: int = 20, tol_mm: float = 1e-4, divergence_window: int = 3,
-                       divergence_rtol: float = 1e-3,
+                       divergence_rtol: float = 1e-3, residual_rtol: float = 1e-4,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
                        on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
-    Stops when ``max |d| < tol_mm`` (q stagnates). If the residual grows (by more than
+    Stops when ``max |d| < tol_mm`` (q stagnates) or when the residual decreased by less
+    than ``residual_rtol`` (relative) over the last step. If the residual grows (by more than
     ``divergence_rtol``, relative) for ``divergence_window`` consecutive iterations, stops
     and returns the best state with ``diverged=True``.
     """
@@ -99,6 +100,10 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         if std < best_std:
             best_q, best_res, best_std = q.copy(), res, std
         rising = rising + 1 if std > previous * (1.0 + divergence_rtol) else 0
+        if it > 1 and abs(previous - std) <= residual_rtol * std:
+            converged = True                                          # the residual stagnates
+            previous = std
+            break
         previous = std
         if rising >= divergence_window:
             diverged = True
