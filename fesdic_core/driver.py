@@ -24,9 +24,9 @@ from tqdm.auto import tqdm
 from .calibration import calibrate_extrinsics
 from .gauge import pose_directions, tangential_motions, transfer_rigid_part
 from .image import Image, pyramid
-from .mesh import SurfaceMesh, node_normals
+from .mesh import SurfaceMesh, node_normals, validate_mesh
 from .quadrature import PixelQuadrature, pixel_quadrature
-from .residual import NORMALISATIONS, GrayLevelResidual
+from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
 from .rig import stereo_transform
 from .shape import DivergenceError, GaussNewtonLog, current_nodes, shape_gauss_newton
 from .solvers import DirectSolver, StepSolver
@@ -97,7 +97,12 @@ class MeasurementInputError(ValueError):
 
 
 def check_inputs(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence) -> None:
-    """Raise :class:`MeasurementInputError` naming the image or camera at fault."""
+    """Raise :class:`MeasurementInputError` naming the image or camera at fault.
+
+    The mesh is validated too (:class:`~fesdic_core.mesh.MeshError` names a degenerate or
+    inverted element).
+    """
+    validate_mesh(mesh)
     if len(images) != 2 or len(cameras) != 2:
         raise MeasurementInputError(f"a stereo pair needs 2 images and 2 cameras, got "
                                     f"{len(images)} and {len(cameras)}")
@@ -118,6 +123,19 @@ def check_inputs(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence) 
             raise MeasurementInputError(
                 f"mesh {mesh.name!r} projects entirely outside {image.source} (camera {cam.name}): "
                 "check the camera poses (landmarks) and the mesh units (mm)")
+
+
+def _report_coverage(quad: PixelQuadrature, res: GrayLevelResidual, scale: int) -> None:
+    """Log the integration points outside an image, and elements left without any."""
+    if res.n_dropped:
+        logger.info("scale %d: %d of %d integration points fall outside an image (or are masked)"
+                    " and are dropped", scale, res.n_dropped, quad.n_points)
+    seen = np.bincount(quad.element, weights=res.mask.astype(float), minlength=quad.n_elements)
+    empty = np.flatnonzero(seen == 0)
+    if empty.size:
+        logger.warning("scale %d: %d element(s) lost all their integration points (first: %s); "
+                       "their nodes are held by the neighbours or the regularization",
+                       scale, empty.size, ", ".join(map(str, empty[:5])))
 
 
 def _projected_shift_px(cameras_a, cameras_b, X: np.ndarray) -> float:
@@ -168,6 +186,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         node_weights = quad.L.T @ quad.weight_mm2
         slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
+        _report_coverage(quad, gray_level_residual(quad.points(nodes_now), quad, imgs, scaled,
+                                                   settings.normalisation, None, mask), scale)
         coarse = 2.0 ** scale
         previous_residual = np.inf
         for fp in range(1, settings.max_fixed_point + 1):
