@@ -16,6 +16,14 @@ its ``MultiscaleInit``), and handles three measured quirks of pyxel-dic 2026.10:
   signature ``(n, G)`` (it works by accident and also builds gradients); the adapter
   integrates each scale itself so that branch is never taken.
 
+Integration rule of each scale: by default pyxel's pixel rule ``m.DICIntegration(cam_s)``
+(about one point per pixel of the scale in every element, the rule of pyxel's own
+examples). ``MultiscaleInit``'s rule ``m.DICIntegrationFast(n)``, n x n points in every
+element with ``n = max(mean element size // 2**s, 2)``, is available as
+``integration="fast"``; on a graded mesh it under-samples the large elements (2 x 2
+points on a 10 px element at scale 1 of pyxel's composite mesh) and, without pyxel's
+Tikhonov term, the spline dofs there drift by tens of pixels.
+
 pyxel is imported lazily (inside the functions): the rest of the project works
 without the optional ``pyxel`` extra.
 """
@@ -37,8 +45,11 @@ from .protocol import LevelRecord, reduced_basis
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PyxelAdapter", "independent_columns", "pyxel_basis", "project_on_basis", "spline_for_mesh",
+__all__ = ["INTEGRATION_RULES", "PyxelAdapter", "independent_columns", "pyxel_basis", "project_on_basis", "spline_for_mesh",
            "correlate_multilevel", "correlate_fe", "import_pyxel"]
+
+#: integration rules of :class:`PyxelAdapter` (see the module docstring)
+INTEGRATION_RULES = ("pixel", "fast")
 
 _EXTRA_HINT = ('the pyxel adapter needs pyxel-dic (PyPI "pyxel-dic", import "pyxel"); '
                'install the optional extra:  python -m pip install -e ".[pyxel]"')
@@ -188,18 +199,24 @@ class PyxelAdapter:
     m : pyxel.Mesh (2-D); cam : pyxel.Camera (2-D).
     eps : pyxel's stopping criterion ``|dU| / |U|``; maxiter : Gauss-Newton iterations.
     direct : sparse direct solves (True) or pyxel's Jacobi-CG with rtol 0.1 (False).
+    integration : "pixel" (``m.DICIntegration(cam_s)``, about one point per pixel of
+        each scale) or "fast" (``MultiscaleInit``'s n x n points per element).
 
     The images, camera and integration rule of each image scale are built once, with
     pyxel's own coarsening, and cached.
     """
 
     def __init__(self, f: Any, g: Any, m: Any, cam: Any, *, eps: float = 1e-3,
-                 maxiter: int = 30, direct: bool = True) -> None:
+                 maxiter: int = 30, direct: bool = True, integration: str = "pixel") -> None:
         pyxel = import_pyxel()
         _check_2d(f, m)
+        if integration not in INTEGRATION_RULES:
+            raise ValueError(f"integration must be one of {INTEGRATION_RULES}, "
+                             f"got {integration!r}")
         self._pyxel, self.f, self.g, self.cam = pyxel, f, g, cam
         self.mesh = _connected(m)
         self.eps, self.maxiter, self.direct = float(eps), int(maxiter), bool(direct)
+        self.integration = integration
         names = pyxel.mesh.eltype_n2s
         self.nodes = np.asarray(m.n, dtype=float)
         self.connectivity = {names.get(et, str(et)): np.asarray(e) for et, e in m.e.items()}
@@ -221,13 +238,15 @@ class PyxelAdapter:
                 g.SubSample(s)
             cam = self.cam.SubSampleCopy(s)
             m = self.mesh.Copy()
-            n = max(int(self.element_size_px) // 2 ** s, 2)  # as MultiscaleInit
             dic = self._pyxel.DICEngine()
             with _pyxel_output():
-                m.DICIntegrationFast(n)  # (n, G): not Correlate's (cam, aes) call
+                if self.integration == "pixel":
+                    m.DICIntegration(cam)  # ~1 point per pixel of this scale
+                else:  # as MultiscaleInit; (n, G), not Correlate's (cam, aes) call
+                    m.DICIntegrationFast(max(int(self.element_size_px) // 2 ** s, 2))
                 H = dic.ComputeLHS(f, m, cam)
-            logger.info("pyxel scale %d: image %s, %d integration points", s,
-                        f.pix.shape, m.npg)
+            logger.info("pyxel scale %d: image %s, %d integration points (%s rule)", s,
+                        f.pix.shape, m.npg, self.integration)
             self._scales[s] = (f, g, m, cam, dic, H)
         return self._scales[int(image_scale)]
 
@@ -257,7 +276,7 @@ class PyxelAdapter:
 def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplinePatch,
                          n_levels: int, scales: tuple[int, ...] | None = None,
                          U0: np.ndarray | None = None, uv: np.ndarray | None = None,
-                         eps: float = 1e-3, maxiter: int = 30
+                         eps: float = 1e-3, maxiter: int = 30, integration: str = "pixel"
                          ) -> tuple[np.ndarray, float, tuple[LevelRecord, ...]]:
     """Spline-regularized FE-DIC in pyxel, spline levels coarse to fine (Eqs. 18-21, 28).
 
@@ -272,6 +291,7 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
     uv : (len(m.n), 2) spline parameters of the nodes if known; default: point
         inversion of the nodes on ``patch_coarse`` (legacy meshes).
     eps, maxiter : pyxel's stopping criterion and iteration cap per level.
+    integration : integration rule of each scale, "pixel" or "fast" (:class:`PyxelAdapter`).
 
     Returns
     -------
@@ -279,7 +299,7 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
     residual_std : gray-level residual std at the end of the finest level;
     history : one :class:`LevelRecord` per level, in the order run.
     """
-    adapter = PyxelAdapter(f, g, m, cam, eps=eps, maxiter=maxiter)
+    adapter = PyxelAdapter(f, g, m, cam, eps=eps, maxiter=maxiter, integration=integration)
     n_levels = int(n_levels)
     scales = tuple(range(n_levels - 1, -1, -1)) if scales is None else tuple(scales)
     if n_levels < 1 or len(scales) != n_levels:
@@ -312,17 +332,18 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
 
 
 def correlate_fe(f: Any, g: Any, m: Any, cam: Any, init_scales: tuple[int, ...] = (3, 2, 1),
-                 U0: np.ndarray | None = None, eps: float = 1e-3, maxiter: int = 30
-                 ) -> tuple[np.ndarray, float]:
+                 U0: np.ndarray | None = None, eps: float = 1e-3, maxiter: int = 30,
+                 integration: str = "pixel") -> tuple[np.ndarray, float]:
     """pyxel without the plugin: ``MultiscaleInit`` (its automatic Tikhonov length)
-    then an unregularized ``Correlate`` on the full images, as pyxel's examples do.
+    then an unregularized ``Correlate`` on the full images (``integration`` rule, by
+    default pyxel's pixel rule ``m.DICIntegration(cam)``), as pyxel's examples do.
 
     Returns
     -------
     U : (m.ndof,) displacement; residual_std : gray-level residual std (full scale).
     """
     pyxel = import_pyxel()
-    adapter = PyxelAdapter(f, g, m, cam, eps=eps, maxiter=maxiter)
+    adapter = PyxelAdapter(f, g, m, cam, eps=eps, maxiter=maxiter, integration=integration)
     U = np.zeros(adapter.n_dof) if U0 is None else np.asarray(U0, dtype=float)
     if init_scales:
         with _pyxel_output():

@@ -144,3 +144,42 @@ def test_dependent_columns_are_dropped_and_the_range_kept():
         np.testing.assert_allclose(adapter.project_on_basis(B[:, keep], column), column,
                                    atol=1e-8)
     np.testing.assert_array_equal(adapter.independent_columns(B0), np.arange(6))
+
+
+def graded_strip():
+    """A pyxel Q4 strip of eight 4 x 20 px columns then two 40 x 20 px ones (2 rows)."""
+    pyxel = pytest.importorskip("pyxel")
+    xb = np.r_[np.arange(0, 33, 4), 72, 112] + 20.0
+    yb = np.array([20.0, 40.0, 60.0])
+    X, Y = np.meshgrid(xb, yb, indexing="ij")
+    ny = yb.size
+    conn = np.array([[i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1]
+                     for i in range(xb.size - 1) for j in range(ny - 1)])
+    m = pyxel.Mesh({3: conn}, np.c_[X.ravel(), -Y.ravel()], 2)  # pyxel's y axis points up
+    rng = np.random.default_rng(0)
+    f, g = pyxel.Image("f"), pyxel.Image("g")
+    f.pix = 200.0 * rng.random((96, 160))
+    g.pix = f.pix.copy()
+    return f, g, m, pyxel.Camera(2), xb, yb
+
+
+def test_large_elements_of_a_graded_mesh_get_a_point_per_pixel_at_coarse_scales():
+    """Regression: MultiscaleInit's n x n rule (n from the mean element size) gave the
+    large elements of pyxel's composite mesh 2 x 2 points at scale 1 and the spline dofs
+    there drifted by ~30 px; the default pixel rule samples every element by its area."""
+    f, g, m, cam, xb, yb = graded_strip()
+    area_px = np.diff(xb) * (yb[-1] - yb[0])  # per column of elements, scale 0
+    density = {}
+    for rule in ("pixel", "fast"):
+        host = adapter.PyxelAdapter(f, g, m, cam, integration=rule)
+        _, _, m_s, _, _, _ = host._scale(1)
+        column = np.searchsorted(xb, np.asarray(m_s.pgx)) - 1
+        density[rule] = np.bincount(column, minlength=xb.size - 1) / (area_px / 4)
+    assert np.all((density["pixel"] > 0.5) & (density["pixel"] < 2.0)), density["pixel"]
+    assert density["fast"][-1] < 0.5 * density["fast"][0]  # what went wrong before
+
+
+def test_unknown_integration_rule_is_refused():
+    f, g, m, cam, _, _ = graded_strip()
+    with pytest.raises(ValueError, match="integration"):
+        adapter.PyxelAdapter(f, g, m, cam, integration="gauss")
