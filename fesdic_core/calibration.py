@@ -56,11 +56,10 @@ def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
 
 def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None) -> np.ndarray:
     """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12)."""
-    g0 = np.einsum("gik,gi->gk", res.jac[0], res.grad[0])            # grad f0^T dx0/dp0
-    g1 = -np.einsum("gik,gi->gk", res.jac[1], res.grad[1])           # -grad f1^T dx1/dp1
+    g0, g1 = res.dr_dp[:, :6], res.dr_dp[:, 6:]       # grad f0^T dx0/dp0, -grad f1^T dx1/dp1
     if stereo_jacobian is not None:
         return g0 + g1 @ stereo_jacobian                              # camera 1 follows camera 0
-    return np.concatenate([g0, g1], axis=1)
+    return res.dr_dp
 
 
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,

@@ -22,7 +22,7 @@ import numpy as np
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Camera", "rodrigues"]
+__all__ = ["Camera", "Linearisation", "rodrigues"]
 
 
 def rodrigues(rvec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -131,61 +131,53 @@ class Camera:
         return self.depth(X) > 0.0
 
     # ------------------------------------------------------------ projection
-    def _distort(self, xn: np.ndarray, with_jacobian: bool):
-        """Distorted pixel coordinates of normalised ``xn`` (n, 2) and d(u, v)/d(x', y') (n, 2, 2)."""
+    def linearise(self, X: np.ndarray) -> tuple[np.ndarray, "Linearisation"]:
+        """Pixels (n, 2) of world points ``X`` (n, 3) and the projection linearised there.
+
+        The :class:`Linearisation` gives vector-Jacobian products ``J^T g`` without forming
+        ``J``: what the Gauss-Newton operators need (``J^T grad f``, Eqs. 6 and 8).
+        """
+        return self._project(X, True)
+
+    def _project(self, X: np.ndarray, linearise: bool) -> tuple[np.ndarray, "Linearisation | None"]:
+        X = _points(X)
+        R = self.R
+        z = X @ R[2] + self.tvec[2]                                # camera frame, one axis a pass
+        inv_z = 1.0 / z
+        xn = (X @ R[0] + self.tvec[0]) * inv_z
+        yn = (X @ R[1] + self.tvec[1]) * inv_z
         k1, k2, p1, p2, k3 = self.dist
-        x, y = xn[:, 0], xn[:, 1]
-        r2 = x * x + y * y
+        fx, skew, cx, fy, cy = self.K[0, 0], self.K[0, 1], self.K[0, 2], self.K[1, 1], self.K[1, 2]
+        if not self.dist.any():                                   # pinhole: D = identity
+            uv = np.column_stack([fx * xn + skew * yn + cx, fy * yn + cy])
+            return uv, (Linearisation(self, X, R, inv_z, xn, yn, None) if linearise else None)
+        xy = xn * yn
+        r2 = xn * xn + yn * yn
         radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        K = self.K
-        uv = np.column_stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]])
-        if not with_jacobian:
+        xd = xn * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn)
+        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy
+        uv = np.column_stack([fx * xd + skew * yd + cx, fy * yd + cy])
+        if not linearise:
             return uv, None
         drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))     # d radial / d r2, times 2
-        D = np.empty((len(x), 2, 2))
-        D[:, 0, 0] = radial + drad * x * x + 2.0 * p1 * y + 6.0 * p2 * x
-        D[:, 0, 1] = drad * x * y + 2.0 * p1 * x + 2.0 * p2 * y
-        D[:, 1, 0] = drad * x * y + 2.0 * p1 * x + 2.0 * p2 * y
-        D[:, 1, 1] = radial + drad * y * y + 6.0 * p1 * y + 2.0 * p2 * x
-        fx, skew, fy = K[0, 0], K[0, 1], K[1, 1]                 # A = [[fx, s], [0, fy]]
-        AD = np.empty_like(D)
-        AD[:, 0, :] = fx * D[:, 0, :] + skew * D[:, 1, :]
-        AD[:, 1, :] = fy * D[:, 1, :]
-        return uv, AD
-
-    def _project_camera_frame(self, Xc: np.ndarray, with_jacobian: bool):
-        """Pixels of camera-frame points (n, 2) and d(u, v)/d x_cam (n, 2, 3)."""
-        z = Xc[:, 2]
-        xn = Xc[:, :2] / z[:, None]
-        uv, D = self._distort(xn, with_jacobian)
-        if not with_jacobian:
-            return uv, None
-        # d(x', y')/d x_cam = [[1/z, 0, -x'/z], [0, 1/z, -y'/z]], applied to D explicitly
-        inv_z = (1.0 / z)[:, None]
-        J = np.empty((len(z), 2, 3))
-        J[:, :, 0] = D[:, :, 0] * inv_z
-        J[:, :, 1] = D[:, :, 1] * inv_z
-        J[:, :, 2] = -(J[:, :, 0] * xn[:, :1] + J[:, :, 1] * xn[:, 1:])
-        return uv, J
+        D = (radial + drad * xn * xn + 2.0 * p1 * yn + 6.0 * p2 * xn,       # d(x'', y'')/d(x', y')
+             drad * xy + 2.0 * p1 * xn + 2.0 * p2 * yn,                     # (symmetric)
+             radial + drad * yn * yn + 6.0 * p1 * yn + 2.0 * p2 * xn)
+        return uv, Linearisation(self, X, R, inv_z, xn, yn, D)
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """Project world points ``X`` (n, 3) mm to pixels (n, 2)."""
-        return self._project_camera_frame(self.to_camera(X), False)[0]
+        return self._project(X, False)[0]
 
     def project_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (n, 2) and the derivative ``dx/dX`` (n, 2, 3) px/mm."""
-        uv, Jc = self._project_camera_frame(self.to_camera(X), True)
-        return uv, (Jc.reshape(-1, 3) @ self.R).reshape(-1, 2, 3)
+        uv, lin = self.linearise(X)
+        return uv, lin.dense(lin.pull_point)
 
     def extrinsic_jacobian(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (n, 2) and the derivative ``dx/dp`` (n, 2, 6), ``p = [rvec, tvec]``."""
-        X = _points(X)
-        R, dR = rodrigues(self.rvec)
-        uv, Jc = self._project_camera_frame(X @ R.T + self.tvec, True)
-        dXc_dr = np.einsum("iab,nb->nai", dR, X)                  # d(R X)/d rvec, (n, 3, 3)
-        return uv, np.concatenate([Jc @ dXc_dr, Jc], axis=2)
+        uv, lin = self.linearise(X)
+        return uv, lin.dense(lin.pull_extrinsic)
 
     # ------------------------------------------------------------ pyramids
     def scaled(self, level: int) -> "Camera":
@@ -215,3 +207,53 @@ class Camera:
         return (f"Camera(name={self.name!r}, f=({K[0, 0]:.6g}, {K[1, 1]:.6g}), c=({K[0, 2]:.6g}, "
                 f"{K[1, 2]:.6g}), skew={K[0, 1]:.3g}, rvec={self.rvec.tolist()}, "
                 f"tvec={self.tvec.tolist()}, image_size={self.image_size})")
+
+
+@dataclass(frozen=True, eq=False)
+class Linearisation:
+    """The projection ``x = P(X)`` linearised at points X, as vector-Jacobian products.
+
+    With ``x_cam = R X + t``, ``x' = x_cam / z``, distortion ``d = D(x')`` and pixels
+    ``x = A d + c`` (``A = [[fx, s], [0, fy]]``), a pixel-space row vector ``g`` (n, 2)
+    (an image gradient) pulls back to the camera frame as
+
+        c = (1/z) [b_x, b_y, -(x' b_x + y' b_y)],   b = D^T A^T g,
+
+    then to the world point (``R^T c``) or to the extrinsics ``p = [rvec, tvec]``
+    (``[(dR/drvec X)^T c, c]``). ``D`` is None for a camera without distortion.
+    """
+
+    camera: Camera
+    X: np.ndarray
+    R: np.ndarray
+    inv_z: np.ndarray
+    xn: np.ndarray
+    yn: np.ndarray
+    D: tuple | None
+
+    def _camera_frame(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        K = self.camera.K
+        ax = K[0, 0] * g[:, 0]                                    # A^T g
+        ay = K[0, 1] * g[:, 0] + K[1, 1] * g[:, 1]
+        if self.D is not None:
+            d00, d01, d11 = self.D
+            ax, ay = d00 * ax + d01 * ay, d01 * ax + d11 * ay     # D^T A^T g
+        bx, by = ax * self.inv_z, ay * self.inv_z
+        return bx, by, -(self.xn * bx + self.yn * by)
+
+    def pull_point(self, g: np.ndarray) -> np.ndarray:
+        """``(dx/dX)^T g`` (n, 3) for pixel-space vectors ``g`` (n, 2)."""
+        return np.column_stack(self._camera_frame(g)) @ self.R
+
+    def pull_extrinsic(self, g: np.ndarray) -> np.ndarray:
+        """``(dx/dp)^T g`` (n, 6), ``p = [rvec, tvec]``, for pixel-space vectors ``g`` (n, 2)."""
+        c = np.column_stack(self._camera_frame(g))
+        _, dR = rodrigues(self.camera.rvec)                       # dR[i] = dR / drvec_i
+        rot = np.einsum("na,iab,nb->ni", c, dR, self.X, optimize=True)   # c . (dR_i X)
+        return np.concatenate([rot, c], axis=1)
+
+    def dense(self, pull) -> np.ndarray:
+        """The Jacobian itself (n, 2, k): the pull-backs of the two pixel axes."""
+        n = len(self.inv_z)
+        rows = [pull(np.broadcast_to(e, (n, 2))) for e in np.eye(2)]
+        return np.stack(rows, axis=1)

@@ -183,7 +183,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         scaled = [c.scaled(scale) for c in cams]
         nodes_now = current_nodes(mesh.nodes, normals, q)
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
-        node_weights = quad.L.T @ quad.weight_mm2
+        node_weights = quad.to_nodes(quad.weight_mm2)
         slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
         _report_coverage(quad, gray_level_residual(quad.points(nodes_now), quad, imgs, scaled,

@@ -6,9 +6,12 @@ covers ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``. The interpolant is the cubic B-spl
 coefficients ``c`` computed once by :func:`scipy.ndimage.spline_filter` (mode "mirror":
 the image is continued symmetrically about its first and last pixel centres, and so are
 the coefficients). The gradient is the exact derivative of that same spline; the value and
-the gradient are evaluated together by a vectorised 4x4 tensor-product sum over the
-coefficients (``b3' (t) = b2(t + 1/2) - b2(t - 1/2)``), which :func:`map_coordinates`
-cannot do since it uses one spline order in both directions.
+the gradient are evaluated together by one 4x4 tensor-product sum over the coefficients
+(``b3' (t) = b2(t + 1/2) - b2(t - 1/2)``), which :func:`map_coordinates` cannot do since it
+uses one spline order in both directions. That sum is the hot loop of every Gauss-Newton
+iteration: it runs in the compiled kernel ``fesdic_core._bspline`` (one pass per point, the
+points split over threads), or, if the package was installed without a C compiler, in the
+vectorised numpy twin :func:`_evaluate_numpy` (same arithmetic, about 10x slower).
 
 ``dynamic_range`` is ``max - min`` of the pixel values (of the data, not of the bit depth):
 it is the scale of the gray-level residual reported in percent.
@@ -26,9 +29,19 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from .parallel import for_each_block
+
+try:
+    from . import _bspline                       # compiled at install (setup.py), optional
+except ImportError:                              # pragma: no cover - no C compiler at install
+    _bspline = None
+
 logger = logging.getLogger(__name__)
 
-__all__ = ["Image", "ImageError", "read_image", "pyramid"]
+__all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL"]
+
+#: True when the fused C kernel is in use (else the numpy twin)
+COMPILED_KERNEL = _bspline is not None
 
 _BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
 
@@ -38,7 +51,8 @@ class ImageError(ValueError):
 
 
 _PAD = 2                          # coefficient padding: covers the 4x4 support of x in [0, n - 1]
-_BLOCK = 1 << 14                  # points per block in evaluate_with_gradient (bounds memory)
+_BLOCK = 1 << 14                  # points per block of the numpy twin (bounds memory)
+_PARALLEL_BLOCK = 1 << 17         # points per block shared out over threads
 
 
 def _fold(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -101,9 +115,7 @@ class Image:
                              f"differs from values shape {self.values.shape}")
         object.__setattr__(self, "dynamic_range", float(self.dynamic_range))
         padded = np.pad(self.coefficients, _PAD, mode="reflect")   # numpy "reflect" = scipy "mirror"
-        object.__setattr__(self, "_padded", padded.ravel())
-        object.__setattr__(self, "_stencil", (np.arange(4)[:, None] * padded.shape[1]
-                                              + np.arange(4)).ravel())
+        object.__setattr__(self, "_padded", np.ascontiguousarray(padded).ravel())
 
     @classmethod
     def from_array(cls, a: np.ndarray, source: str = "array") -> "Image":
@@ -137,31 +149,18 @@ class Image:
         """Gray levels (n,) and exact spline gradient (n, 2) = [d/dx, d/dy] at ``xy`` (n, 2).
 
         ``f = sum_ab c[i+a, j+b] wy_a wx_b`` over the 4x4 support, ``df/dx`` with ``wx'``,
-        ``df/dy`` with ``wy'`` (vectorised, in blocks of points to bound memory).
+        ``df/dy`` with ``wy'``. NaN coordinates give NaN.
         """
-        xy = _xy(xy)
+        xy = np.ascontiguousarray(_xy(xy))
         h, w = self.values.shape
         value = np.empty(len(xy))
         grad = np.empty((len(xy), 2))
-        for start in range(0, len(xy), _BLOCK):
-            block = slice(start, start + _BLOCK)
-            finite = np.isfinite(xy[block]).all(axis=1)
-            pts = np.where(finite[:, None], xy[block], 0.0)        # NaN in, NaN out
-            x, sx = _fold(pts[:, 0], w)
-            y, sy = _fold(pts[:, 1], h)
-            i, j = np.floor(y), np.floor(x)
-            wy, dwy = _cubic_weights(y - i)
-            wx, dwx = _cubic_weights(x - j)
-            corner = (i.astype(np.int64) + _PAD - 1) * (w + 2 * _PAD) + j.astype(np.int64) + _PAD - 1
-            c = self._padded.take(corner[:, None] + self._stencil).reshape(-1, 4, 4)
-            cx = np.einsum("nab,nb->na", c, wx)
-            cdx = np.einsum("nab,nb->na", c, dwx)
-            value[block] = np.einsum("na,na->n", wy, cx)
-            grad[block, 0] = sx * np.einsum("na,na->n", wy, cdx)
-            grad[block, 1] = sy * np.einsum("na,na->n", dwy, cx)
-            if not finite.all():
-                value[block][~finite] = np.nan
-                grad[block][~finite] = np.nan
+        kernel = _evaluate_compiled if _bspline is not None else _evaluate_numpy
+
+        def run(block: slice) -> None:
+            kernel(self._padded, h, w, xy[block], value[block], grad[block])
+
+        for_each_block(run, len(xy), _PARALLEL_BLOCK)
         return value, grad
 
     def gradient(self, xy: np.ndarray) -> np.ndarray:
@@ -188,6 +187,37 @@ class Image:
         v = self.values[: h - h % 2, : w - w % 2]
         coarse = v.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
         return Image.from_array(coarse, f"{self.source} /2")
+
+
+def _evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
+                       grad: np.ndarray) -> None:
+    """Fill ``value`` (n,) and ``grad`` (n, 2) at ``xy`` (n, 2) with the compiled kernel."""
+    _bspline.evaluate(padded, h, w, _PAD, xy, value, grad)
+
+
+def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
+                    grad: np.ndarray) -> None:
+    """The numpy twin of the compiled kernel (blocks of points to bound memory)."""
+    stencil = (np.arange(4)[:, None] * (w + 2 * _PAD) + np.arange(4)).ravel()
+    for start in range(0, len(xy), _BLOCK):
+        block = slice(start, start + _BLOCK)
+        finite = np.isfinite(xy[block]).all(axis=1)
+        pts = np.where(finite[:, None], xy[block], 0.0)            # NaN in, NaN out
+        x, sx = _fold(pts[:, 0], w)
+        y, sy = _fold(pts[:, 1], h)
+        i, j = np.floor(y), np.floor(x)
+        wy, dwy = _cubic_weights(y - i)
+        wx, dwx = _cubic_weights(x - j)
+        corner = (i.astype(np.int64) + _PAD - 1) * (w + 2 * _PAD) + j.astype(np.int64) + _PAD - 1
+        c = padded.take(corner[:, None] + stencil).reshape(-1, 4, 4)
+        cx = np.einsum("nab,nb->na", c, wx)
+        cdx = np.einsum("nab,nb->na", c, dwx)
+        value[block] = np.einsum("na,na->n", wy, cx)
+        grad[block, 0] = sx * np.einsum("na,na->n", wy, cdx)
+        grad[block, 1] = sy * np.einsum("na,na->n", dwy, cx)
+        if not finite.all():
+            value[block][~finite] = np.nan
+            grad[block][~finite] = np.nan
 
 
 def read_image(path: str | os.PathLike) -> Image:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Sequence
 
 import numpy as np
@@ -22,7 +23,39 @@ logger = logging.getLogger(__name__)
 _N_CORNERS = {"quad": 4, "triangle": 3}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
+class ElementGroup:
+    """Elements of one family cut into the same sub-cell grid.
+
+    Their points are contiguous in the quadrature, element after element: points
+    ``start + e * m + k`` (``k < m``) belong to ``elements[e]`` and sit at the parent
+    coordinates ``xi[k]``, where the shape functions are ``N[k]`` (the same for every
+    element of the group). Operators built element by element (Eq. 8) use this layout.
+
+    Attributes
+    ----------
+    start : first point of the group
+    elements : (E,) global element indices
+    connectivity : (E, nn) node indices of those elements
+    N : (m, nn) shape functions at the sub-cell centres
+    """
+
+    start: int
+    elements: np.ndarray
+    connectivity: np.ndarray
+    N: np.ndarray
+
+    @property
+    def points_per_element(self) -> int:
+        return self.N.shape[0]
+
+    @property
+    def span(self) -> slice:
+        """The group's points in the quadrature arrays."""
+        return slice(self.start, self.start + len(self.elements) * self.N.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
 class PixelQuadrature:
     """Integration points of one image scale.
 
@@ -34,25 +67,60 @@ class PixelQuadrature:
         Parent coordinates.
     weight_mm2 : (g,) float
         Area of the point's sub-cell on the nominal surface.
-    L : csr (g, n_nodes)
-        Shape functions of the point's element at the point (``L^T`` of Eq. 4).
-    n_elements : int
-        Number of elements of the mesh.
+    groups : tuple of ElementGroup
+        The points, element by element (see :class:`ElementGroup`).
+    n_elements, n_nodes : int
+        Number of elements and of nodes of the mesh.
     """
 
     element: np.ndarray
     xi: np.ndarray
     weight_mm2: np.ndarray
-    L: sps.csr_matrix
+    groups: tuple
     n_elements: int
+    n_nodes: int
 
     @property
     def n_points(self) -> int:
         return self.element.size
 
     def points(self, nodes: np.ndarray) -> np.ndarray:
-        """Physical positions ``X_g = sum_I L_I(xi_g) X_I`` (Eq. 4) for node positions (n, 3)."""
-        return self.L @ nodes
+        """Physical positions ``X_g = sum_I L_I(xi_g) X_I`` (Eq. 4) for node values (n, k)."""
+        nodes = np.asarray(nodes, dtype=np.float64)
+        out = np.empty((self.n_points,) + nodes.shape[1:])
+        for group in self.groups:
+            local = nodes[group.connectivity]                              # (E, nn[, k])
+            X = group.N @ local if local.ndim == 3 else local @ group.N.T  # (E, m[, k]), Eq. 4
+            out[group.span] = X.reshape((-1,) + nodes.shape[1:])
+        return out
+
+    def to_nodes(self, values: np.ndarray) -> np.ndarray:
+        """``L^T v`` (n_nodes,): point values gathered to the nodes, ``sum_g L_I(xi_g) v_g``."""
+        out = np.zeros(self.n_nodes)
+        for group in self.groups:
+            local = np.asarray(values)[group.span].reshape(len(group.elements), -1) @ group.N
+            out += np.bincount(group.connectivity.ravel(), weights=local.ravel(),
+                               minlength=self.n_nodes)
+        return out
+
+    def element_sum(self, values: np.ndarray) -> np.ndarray:
+        """(n_elements,) sums of point values ``values`` (g,) over each element."""
+        out = np.zeros(self.n_elements)
+        for group in self.groups:
+            out[group.elements] = values[group.span].reshape(len(group.elements), -1).sum(axis=1)
+        return out
+
+    @cached_property
+    def L(self) -> sps.csr_matrix:
+        """The shape functions of every point, csr (g, n_nodes) (``L^T`` of Eq. 4)."""
+        rows, cols, vals = [], [], []
+        for group in self.groups:
+            E, (m, nn) = len(group.elements), group.N.shape
+            rows.append(np.repeat(np.arange(group.start, group.start + E * m), nn))
+            cols.append(np.repeat(group.connectivity, m, axis=0).ravel())
+            vals.append(np.broadcast_to(group.N, (E, m, nn)).ravel())
+        return sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                              shape=(self.n_points, self.n_nodes))
 
 
 def _subcell_centres(reference: str, n: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +183,7 @@ def pixel_quadrature(mesh: SurfaceMesh, cameras: Sequence, points_per_px: float 
         Current node positions used to size the elements (default: nominal).
     """
     nodes_now = mesh.nodes if nodes is None else nodes
-    elements, xis, weights, rows, cols, vals = [], [], [], [], [], []
+    elements, xis, weights, groups = [], [], [], []
     offset, start = 0, 0
     for block in mesh.blocks:
         family, conn = block.family, block.connectivity
@@ -126,22 +194,23 @@ def pixel_quadrature(mesh: SurfaceMesh, cameras: Sequence, points_per_px: float 
             xi, parent_area = _subcell_centres(family.reference, (int(n[0]), int(n[1])))
             N = family.shape_functions(xi)                                   # (m, nn)
             dN = family.shape_derivatives(xi)                                # (m, nn, 2)
-            Xe = mesh.nodes[conn[members]]                                   # (e, nn, 3)
-            J = np.einsum("eid,mia->emda", Xe, dN)
-            dA = np.linalg.norm(np.cross(J[..., 0], J[..., 1]), axis=-1)     # |X,xi x X,eta|
             m = len(xi)
+            Xe = mesh.nodes[conn[members]]                                   # (e, nn, 3)
+            J = dN.transpose(0, 2, 1).reshape(2 * m, -1) @ Xe                # (e, 2m, 3)
+            a, b = J[:, 0::2], J[:, 1::2]                                    # X,xi and X,eta
+            dA = np.sqrt((a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]) ** 2  # |X,xi x X,eta|
+                         + (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]) ** 2
+                         + (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) ** 2)
             elements.append(np.repeat(members + offset, m))
             xis.append(np.tile(xi, (len(members), 1)))
             weights.append((dA * parent_area).ravel())
-            point_ids = start + np.arange(len(members) * m).reshape(len(members), m)
-            rows.append(np.repeat(point_ids[..., None], conn.shape[1], axis=2).ravel())
-            cols.append(np.repeat(conn[members][:, None, :], m, axis=1).ravel())
-            vals.append(np.broadcast_to(N, (len(members), m, conn.shape[1])).ravel())
+            groups.append(ElementGroup(start=start, elements=members + offset,
+                                       connectivity=conn[members], N=N))
             start += len(members) * m
         offset += len(conn)
-    L = sps.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(start, mesh.nodes.shape[0])).tocsr()
     quad = PixelQuadrature(element=np.concatenate(elements), xi=np.concatenate(xis),
-                           weight_mm2=np.concatenate(weights), L=L, n_elements=offset)
-    logger.debug("pixel quadrature: %d points on %d elements", quad.n_points, offset)
+                           weight_mm2=np.concatenate(weights), groups=tuple(groups),
+                           n_elements=offset, n_nodes=mesh.nodes.shape[0])
+    logger.debug("pixel quadrature: %d points on %d elements in %d groups", quad.n_points, offset,
+                 len(groups))
     return quad

@@ -13,6 +13,7 @@ from typing import Literal, Sequence
 
 import numpy as np
 
+from .parallel import for_each_block
 from .quadrature import PixelQuadrature
 
 logger = logging.getLogger(__name__)
@@ -20,28 +21,27 @@ logger = logging.getLogger(__name__)
 Normalisation = Literal["element", "global", "none"]
 NORMALISATIONS = ("element", "global", "none")
 _SIGMA_FLOOR = 0.005  # fraction of the dynamic range below which an element is "uniform"
+_BLOCK = 1 << 15      # points per block: the temporaries of a block stay in cache
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GrayLevelResidual:
-    """Residual and what its derivatives need, at the integration points.
+    """Residual and its derivatives at the integration points.
 
     Attributes
     ----------
     r : (g,) normalised residual of Eq. 3 (0 where ``mask`` is False)
-    mask : (g,) bool, point seen inside both images
-    x : tuple of (g, 2) pixel positions in each image
-    grad : tuple of (g, 2) normalised image gradients ``grad f_c / sigma_c``
-    jac : tuple of (g, 2, k) Jacobians of the projections (k = 3 for dX, 6 for extrinsics) or None
+    mask : (g,) bool, point seen inside both images (and kept by the extra mask)
+    dr_dX : (g, 3) ``dr/dX = J0^T grad f0 - J1^T grad f1`` (normalised gradients), or None
+    dr_dp : (g, 12) ``dr/dp`` for the extrinsics ``[p0, p1]`` of the two cameras, or None
     sigma0 : (g,) gray-level scale of image 0 at the point (to turn r into gray levels)
     dynamic_range : float, dynamic range of image 0 (gray levels)
     """
 
     r: np.ndarray
     mask: np.ndarray
-    x: tuple
-    grad: tuple
-    jac: tuple | None
+    dr_dX: np.ndarray | None
+    dr_dp: np.ndarray | None
     sigma0: np.ndarray
     dynamic_range: float
 
@@ -63,22 +63,47 @@ class GrayLevelResidual:
         return int(np.count_nonzero(~self.mask))
 
 
-def _normalise(values: np.ndarray, mask: np.ndarray, element: np.ndarray, n_elements: int,
-               mode: str, dynamic_range: float) -> tuple[np.ndarray, np.ndarray]:
-    """Return ``(f - mean) / sigma`` and ``sigma`` per point (Remark 2)."""
+def _element_statistics(f: np.ndarray, mask: np.ndarray, quad: PixelQuadrature, mode: str,
+                        dynamic_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and scale of the gray levels ``f`` (g,) over each element (n_elements,) (Remark 2).
+
+    "global" puts the statistics of the whole region in every element, "none" is (0, 1).
+    """
     if mode == "none":
-        return values, np.ones_like(values)
+        return np.zeros(quad.n_elements), np.ones(quad.n_elements)
+    fm = np.where(mask, f, 0.0)
     if mode == "global":
-        v = values[mask]
-        mean, sigma = v.mean(), max(v.std(), _SIGMA_FLOOR * dynamic_range)
-        return (values - mean) / sigma, np.full_like(values, sigma)
-    w = mask.astype(float)
-    count = np.bincount(element, weights=w, minlength=n_elements)
-    safe = np.maximum(count, 1.0)
-    mean = np.bincount(element, weights=w * values, minlength=n_elements) / safe
-    var = np.bincount(element, weights=w * values ** 2, minlength=n_elements) / safe - mean ** 2
+        count = max(np.count_nonzero(mask), 1)
+        sums = np.array([[fm.sum()], [np.dot(fm, fm)]]) / count
+    else:
+        count = np.maximum(quad.element_sum(mask.astype(float)), 1.0)
+        sums = np.stack([quad.element_sum(fm), quad.element_sum(fm * fm)]) / count
+    mean, var = sums[0], sums[1] - sums[0] ** 2
     sigma = np.maximum(np.sqrt(np.maximum(var, 0.0)), _SIGMA_FLOOR * dynamic_range)
-    return (values - mean[element]) / sigma[element], sigma[element]
+    return (np.broadcast_to(mean, quad.n_elements).copy(),
+            np.broadcast_to(sigma, quad.n_elements).copy())
+
+
+def _project_and_sample(X: np.ndarray, images: Sequence, cameras: Sequence, jacobian: str | None,
+                        mask: np.ndarray, f: np.ndarray, pull: np.ndarray) -> None:
+    """One block of points: project into both views, sample ``f_c``, pull ``grad f_c`` back.
+
+    Writes the block's mask (in place), gray levels ``f`` (2, b) and pulled-back gradients
+    ``J_c^T grad f_c`` (2, b, k) (not yet normalised).
+    """
+    views = []
+    for image, cam in zip(images, cameras):
+        x, lin = cam.linearise(X)
+        with np.errstate(invalid="ignore"):
+            mask &= (lin.inv_z > 0.0) & np.isfinite(x).all(axis=1) & image.inside(x)
+        views.append((x, lin))
+    for c, (image, (x, lin)) in enumerate(zip(images, views)):
+        value, grad = image.evaluate_with_gradient(np.where(mask[:, None], x, 0.0))
+        f[c] = value
+        if jacobian == "point":
+            pull[c] = lin.pull_point(grad)                             # J_c^T grad f_c
+        elif jacobian == "extrinsic":
+            pull[c] = lin.pull_extrinsic(grad)
 
 
 def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
@@ -92,36 +117,40 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
     quad : PixelQuadrature
     images, cameras : the two images and their cameras at the same scale
     normalisation : "element" (Remark 2), "global" or "none"
-    jacobian : "point" (dx/dX, for the shape), "extrinsic" (dx/dp, for calibration) or None
+    jacobian : "point" (``dr/dX``, for the shape), "extrinsic" (``dr/dp``, for calibration)
+        or None
     extra_mask : (g,) bool, optional, points to ignore (e.g. faces hidden from a camera)
+
+    Two passes over cache-sized blocks of points shared out over threads (numpy and the
+    interpolation kernel release the GIL): sampling, then, with the statistics of each
+    element, the normalised residual and its derivative.
     """
     if normalisation not in NORMALISATIONS:
         raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}")
-    mask = np.ones(len(X), dtype=bool) if extra_mask is None else extra_mask.copy()
-    xs, jacs, vals, grads = [], [], [], []
-    for image, cam in zip(images, cameras):
-        if jacobian == "point":
-            x, J = cam.project_jacobian(X)
-        elif jacobian == "extrinsic":
-            x, J = cam.extrinsic_jacobian(X)
-        else:
-            x, J = cam.project(X), None
-        mask &= np.all(np.isfinite(x), axis=1) & image.inside(x) & cam.in_front(X)
-        xs.append(x)
-        jacs.append(J)
-    for image, x in zip(images, xs):
-        xm = np.where(mask[:, None], x, 0.0)                     # keep unseen points harmless
-        f, g = image.evaluate_with_gradient(xm)
-        vals.append(f)
-        grads.append(g)
+    if jacobian not in (None, "point", "extrinsic"):
+        raise ValueError(f"jacobian must be None, 'point' or 'extrinsic', got {jacobian!r}")
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    g = len(X)
+    mask = np.ones(g, dtype=bool) if extra_mask is None else np.array(extra_mask, dtype=bool)
+    f = np.empty((2, g))
+    pull = np.empty((2, g, {"point": 3, "extrinsic": 6, None: 0}[jacobian]))
+    for_each_block(lambda b: _project_and_sample(X[b], images, cameras, jacobian, mask[b],
+                                                 f[:, b], pull[:, b]), g, _BLOCK)
     dyn = float(images[0].dynamic_range)
-    normed, sigmas = [], []
-    for f in vals:
-        fn, sigma = _normalise(f, mask, quad.element, quad.n_elements, normalisation, dyn)
-        normed.append(fn)
-        sigmas.append(sigma)
-    r = np.where(mask, normed[0] - normed[1], 0.0)              # Eq. 3 (Remark 2)
-    grad = tuple(np.where(mask[:, None], g / s[:, None], 0.0) for g, s in zip(grads, sigmas))
-    return GrayLevelResidual(r=r, mask=mask, x=tuple(xs), grad=grad,
-                             jac=None if jacobian is None else tuple(jacs),
-                             sigma0=sigmas[0], dynamic_range=dyn)
+    (mean0, sigma0), (mean1, sigma1) = (_element_statistics(fc, mask, quad, normalisation, dyn)
+                                        for fc in f)
+    r, s0 = np.empty(g), np.empty(g)
+
+    def normalise(b: slice) -> None:                                   # Remark 2, then Eq. 3
+        e, seen = quad.element[b], mask[b]
+        s0[b], s1 = sigma0[e], sigma1[e]
+        r[b] = np.where(seen, (f[0, b] - mean0[e]) / s0[b] - (f[1, b] - mean1[e]) / s1, 0.0)
+        pull[0, b] *= np.where(seen, 1.0 / s0[b], 0.0)[:, None]
+        pull[1, b] *= np.where(seen, -1.0 / s1, 0.0)[:, None]
+        if jacobian == "point":
+            pull[0, b] += pull[1, b]                                   # J0^T df0 - J1^T df1
+
+    for_each_block(normalise, g, _BLOCK)
+    return GrayLevelResidual(r=r, mask=mask, dr_dX=pull[0] if jacobian == "point" else None,
+                             dr_dp=np.hstack([pull[0], pull[1]]) if jacobian == "extrinsic" else None,
+                             sigma0=s0, dynamic_range=dyn)

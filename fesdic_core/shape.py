@@ -21,9 +21,12 @@ import scipy.sparse as sps
 
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
+from .parallel import for_each_block
 from .solvers import StepSolver
 
 logger = logging.getLogger(__name__)
+
+_ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
 
 
 class DivergenceError(RuntimeError):
@@ -41,15 +44,36 @@ def current_nodes(nodes0: np.ndarray, normals: np.ndarray, q: np.ndarray) -> np.
 
 def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelResidual
                     ) -> tuple[sps.csr_matrix, np.ndarray]:
-    """Assemble ``H_FE`` and ``b_FE`` of Eq. 8 in the normal-projected unknown (Remark 1)."""
-    g = (np.einsum("gij,gi->gj", res.jac[0], res.grad[0])
-         - np.einsum("gij,gi->gj", res.jac[1], res.grad[1]))          # J0^T df0 - J1^T df1
-    L = quad.L.tocoo()
-    phi_values = L.data * np.einsum("kd,kd->k", g[L.row], normals[L.col])   # L_I (g . n_I)
-    phi = sps.csr_matrix((phi_values, (L.row, L.col)), shape=L.shape)
+    """Assemble ``H_FE`` and ``b_FE`` of Eq. 8 in the normal-projected unknown (Remark 1).
+
+    Element by element (the points of an element are contiguous, :class:`ElementGroup`):
+    ``Phi_e[g, i] = L_i(xi_g) (dr/dX_g . n_i)`` (m, nn), ``H_e = Phi_e^T W Phi_e`` and
+    ``b_e = -Phi_e^T W r``, then the usual finite-element scatter into the global system.
+    """
     w = np.where(res.mask, quad.weight_mm2, 0.0)
-    H = (phi.T @ sps.diags(w) @ phi).tocsr()                          # Eq. 8
-    b = -(phi.T @ (w * res.r))                                        # Eq. 8
+    n = normals.shape[0]
+    rows, cols, values, b = [], [], [], np.zeros(n)
+    for group in quad.groups:
+        E, (m, nn) = len(group.elements), group.N.shape
+        He, be = np.empty((E, nn, nn)), np.empty((E, nn))
+
+        def element_block(span: slice) -> None:
+            points = slice(group.start + span.start * m, group.start + span.stop * m)
+            g = res.dr_dX[points].reshape(-1, m, 3)                  # dr/dX = J0^T df0 - J1^T df1
+            n_e = normals[group.connectivity[span]]                    # (e, nn, 3)
+            phi = (g @ n_e.transpose(0, 2, 1)) * group.N               # L_I (g . n_I), (e, m, nn)
+            wphi = phi * w[points].reshape(-1, m, 1)
+            He[span] = wphi.transpose(0, 2, 1) @ phi                   # Eq. 8
+            be[span] = -(res.r[points].reshape(-1, 1, m) @ wphi)[:, 0]  # Eq. 8
+
+        for_each_block(element_block, E, max(1, _ELEMENT_BLOCK // m))
+        conn = group.connectivity
+        rows.append(np.repeat(conn, nn, axis=1).ravel())
+        cols.append(np.tile(conn, (1, nn)).ravel())
+        values.append(He.ravel())
+        b += np.bincount(conn.ravel(), weights=be.ravel(), minlength=n)
+    H = sps.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n, n))                                   # duplicates summed
     return H, b
 
 

@@ -5,6 +5,7 @@ import pytest
 from scipy import ndimage
 
 from fesdic_core.camera import Camera
+from fesdic_core import image as image_module, parallel
 from fesdic_core.image import Image, ImageError, pyramid, read_image
 
 
@@ -177,3 +178,20 @@ def test_image_arrays_are_read_only_and_caller_arrays_untouched():
             arr[0, 0] = 1.0
     with pytest.raises(ImageError, match="coefficients shape"):
         Image(a, a[:4], 1.0, "mismatch")
+
+
+@pytest.mark.skipif(not image_module.COMPILED_KERNEL, reason="installed without the C kernel")
+@pytest.mark.parametrize("shape", [(37, 53), (1, 9), (200, 150)])
+def test_compiled_kernel_equals_its_numpy_twin(shape, monkeypatch):
+    image = _random_image(shape, seed=3)
+    xy = _random_points(image, 200_000, seed=4, pad=40.0)          # mirror folds included
+    xy[::997] = np.nan
+    xy[1::1009, 0] = np.inf
+    h, w = image.shape
+    monkeypatch.setattr(parallel, "THREADS", 2)                     # threaded split
+    compiled = image.evaluate_with_gradient(xy)
+    value, grad = np.empty(len(xy)), np.empty((len(xy), 2))
+    image_module._evaluate_numpy(image._padded, h, w, xy, value, grad)
+    for a, b in zip(compiled, (value, grad)):
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * image.dynamic_range, equal_nan=True)

@@ -66,3 +66,21 @@ def test_subdivisions_follow_the_projected_size(cameras):
     px_per_mm = cameras[0].K[0, 0] / 400.0
     assert np.all(np.abs(n[:, 0] / (20.0 * px_per_mm) - 1) < 0.15)
     assert np.all(np.abs(n[:, 1] / (30.0 * px_per_mm) - 1) < 0.15)
+
+
+@pytest.mark.parametrize("family", ["T6", "Q9"])
+def test_element_groups_agree_with_the_sparse_operator(family, cameras):
+    mesh = rectangle_mesh(60.0, 40.0, 5, 3, family=family)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.3)
+    rng = np.random.default_rng(0)
+    nodes = rng.standard_normal((mesh.n_nodes, 3))
+    np.testing.assert_allclose(quad.points(nodes), quad.L @ nodes, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(quad.points(nodes[:, 0]), quad.L @ nodes[:, 0], rtol=0, atol=1e-12)
+    v = rng.standard_normal(quad.n_points)
+    np.testing.assert_allclose(quad.to_nodes(v), quad.L.T @ v, rtol=0, atol=1e-10)
+    covered = np.zeros(quad.n_points, int)
+    for group in quad.groups:                      # groups tile the points, element by element
+        covered[group.span] += 1
+        np.testing.assert_array_equal(quad.element[group.span],
+                                      np.repeat(group.elements, group.points_per_element))
+    assert np.all(covered == 1)

@@ -1,0 +1,30 @@
+"""Blocks of points shared out over threads.
+
+The work of an iteration is a long run of independent points (projection, interpolation,
+pull-back of the gradients). It is cut into blocks small enough for their temporaries to
+stay in cache, and the blocks are shared out over ``THREADS`` threads: numpy's loops and
+the compiled interpolation kernel release the GIL, so the threads run in parallel.
+``FESDIC_THREADS`` in the environment sets the number of threads (default: the CPUs, at
+most 8); 1 runs everything on the calling thread.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
+
+__all__ = ["THREADS", "for_each_block"]
+
+THREADS = max(1, int(os.environ.get("FESDIC_THREADS", min(os.cpu_count() or 1, 8))))
+
+
+def for_each_block(work: Callable[[slice], None], n: int, block: int) -> None:
+    """Call ``work(span)`` for consecutive spans of ``block`` items covering ``range(n)``."""
+    spans = [slice(a, min(a + block, n)) for a in range(0, n, block)]
+    if THREADS == 1 or len(spans) < 2:
+        for span in spans:
+            work(span)
+        return
+    with ThreadPoolExecutor(min(THREADS, len(spans))) as pool:
+        for _ in pool.map(work, spans):                      # re-raises a block's exception
+            pass

@@ -1,0 +1,9 @@
+"""Build of the one compiled kernel (metadata lives in setup.cfg).
+
+``fesdic_core._bspline`` is the fused bicubic B-spline interpolation of images (value and
+gradient). It is optional: without a C compiler the install goes on and
+``fesdic_core.image`` falls back to its numpy implementation (same results, slower).
+"""
+from setuptools import Extension, setup
+
+setup(ext_modules=[Extension("fesdic_core._bspline", ["fesdic_core/_bspline.c"], optional=True)])
