@@ -5,7 +5,11 @@
   circumferential direction ``u`` with knots {0,0,0,.25,.25,.5,.5,.75,.75,1,1,1}
   (four C0-C0 elements, one 90-degree rational arc of the hole each) and degree 2 in
   the radial direction ``v`` (hole at ``v = 0``, plate boundary at ``v = 1``);
-* :func:`cylinder`: an exact NURBS cylindrical patch (arcs of at most 90 degrees).
+* :func:`cylinder`: an exact NURBS cylindrical patch (arcs of at most 90 degrees);
+* :func:`quadrilateral`: a flat B-spline patch through four corners in 3-D (a face of a
+  CAD model: a block top, a prism face);
+* :func:`transformed`: any patch moved by a rigid motion (NURBS are affinely invariant:
+  moving the control points moves the surface exactly).
 
 All patches have the normal ``S_u x S_v`` pointing outwards (+z for the plates).
 """
@@ -19,7 +23,8 @@ from .patch import SplinePatch
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["rectangle", "plate_with_hole", "cylinder", "arc_control_points"]
+__all__ = ["rectangle", "plate_with_hole", "cylinder", "arc_control_points", "quadrilateral",
+           "transformed"]
 
 
 def _positive(value: float, name: str) -> float:
@@ -157,3 +162,58 @@ def cylinder(radius_mm: float, length_mm: float, angle_deg: float = 180.0,
     inner = np.repeat(np.arange(1, k) / k, 2)
     knots_u = np.r_[0, 0, 0, inner, 1, 1, 1]
     return SplinePatch((2, 2), (knots_u, _open_uniform(2)), cp, np.repeat(w[:, None], 3, 1))
+
+
+def quadrilateral(corners, degrees=(2, 2), planarity_tol_mm: float = 1e-6) -> SplinePatch:
+    """Flat B-spline patch through four corners in 3-D, one element.
+
+    Parameters
+    ----------
+    corners : (4, 3) corners ``c00, c10, c11, c01`` (mm), in order around the face; ``u``
+        runs from ``c00`` to ``c10``, ``v`` from ``c00`` to ``c01``, and the normal
+        ``S_u x S_v`` points to the side from which the corners turn counter-clockwise.
+    degrees : (p_u, p_v) >= 1
+    planarity_tol_mm : largest distance of a corner to the plane of the others
+
+    Returns
+    -------
+    SplinePatch (B-spline), the bilinear map ``S(u, v)`` of the corners (control points
+    equally spaced: linear precision), flat.
+    """
+    c = np.asarray(corners, dtype=float)
+    if c.shape != (4, 3) or not np.all(np.isfinite(c)):
+        raise ValueError(f"corners: expected (4, 3) finite coordinates, got shape {c.shape}")
+    pu, pv = (int(d) for d in degrees)
+    if pu < 1 or pv < 1:
+        raise ValueError(f"degrees: must be >= 1, got {degrees}")
+    normal = np.cross(c[2] - c[0], c[3] - c[1])               # diagonals: robust for a quad
+    if np.linalg.norm(normal) <= 1e-12 * np.ptp(c, axis=0).max() ** 2:
+        raise ValueError(f"corners: degenerate quadrilateral {c.tolist()}")
+    normal /= np.linalg.norm(normal)
+    off = float(np.max(np.abs((c - c.mean(axis=0)) @ normal)))
+    if off > planarity_tol_mm:
+        raise ValueError(f"corners: not coplanar, a corner is {off:.3g} mm off their mean plane "
+                         f"(tolerance {planarity_tol_mm:g} mm)")
+    u = np.linspace(0.0, 1.0, pu + 1)[:, None, None]
+    v = np.linspace(0.0, 1.0, pv + 1)[None, :, None]
+    cp = ((1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + u * v * c[2] + (1 - u) * v * c[3])
+    return SplinePatch((pu, pv), (_open_uniform(pu), _open_uniform(pv)), cp)
+
+
+def transformed(patch: SplinePatch, rotation=np.eye(3), translation=(0.0, 0.0, 0.0)) -> SplinePatch:
+    """The patch moved by ``X -> R X + t`` (exact: the control points are moved).
+
+    Parameters
+    ----------
+    rotation : (3, 3) proper rotation matrix ``R``
+    translation : (3,) ``t`` (mm)
+    """
+    R = np.asarray(rotation, dtype=float)
+    t = np.asarray(translation, dtype=float)
+    if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) \
+            or np.linalg.det(R) <= 0:
+        raise ValueError(f"rotation: expected a proper 3 x 3 rotation matrix, got {R.tolist()}")
+    if t.shape != (3,) or not np.all(np.isfinite(t)):
+        raise ValueError(f"translation: expected 3 finite numbers, got {t.tolist()}")
+    cp = patch.control_points @ R.T + t
+    return SplinePatch(patch.degrees, patch.knots, cp, patch.weights)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from georeg_plugin.geometries import cylinder, plate_with_hole, rectangle
+from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle, transformed
 from georeg_plugin.refine import insert_knots, refine_uniform
 
 L, W, R = 180.0, 50.0, 14.0
@@ -94,3 +94,54 @@ def test_cylinder_is_exact_with_outward_normal(axis, angle):
     np.testing.assert_allclose(n, expected, atol=1e-12)
     crest = s.evaluate([[0.5, 0.5]])[0]
     assert crest[2] == pytest.approx(radius, abs=1e-12)
+
+
+def _rotation(axis, angle_rad):
+    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle_rad) * K + (1 - np.cos(angle_rad)) * K @ K
+
+
+@pytest.mark.parametrize("degrees", [(1, 1), (2, 2), (3, 2)])
+def test_quadrilateral_is_the_flat_bilinear_map_of_its_corners(degrees):
+    R = _rotation([1.0, -2.0, 0.5], 0.7)
+    flat = np.array([[0, 0, 0], [30, 2, 0], [27, 21, 0], [-1, 18, 0]], float)  # not a rectangle
+    corners = flat @ R.T + [5.0, -3.0, 6.36]
+    s = quadrilateral(corners, degrees=degrees)
+    assert s.degrees == degrees and s.n_elements == (1, 1) and not s.is_rational
+    np.testing.assert_allclose(s.evaluate([[0, 0], [1, 0], [1, 1], [0, 1]]), corners, atol=1e-12)
+    uv = np.random.default_rng(5).uniform(0, 1, (500, 2))
+    u, v = uv[:, :1], uv[:, 1:]
+    bilinear = (1 - u) * (1 - v) * corners[0] + u * (1 - v) * corners[1] + u * v * corners[2] \
+        + (1 - u) * v * corners[3]
+    np.testing.assert_allclose(s.evaluate(uv), bilinear, atol=1e-11)
+    # flat, normal = R e_z (the corners turn counter-clockwise seen from +z before rotation)
+    np.testing.assert_allclose(s.normals(uv), np.tile(R[:, 2], (len(uv), 1)), atol=1e-12)
+    refined, _ = refine_uniform(s, 2)
+    np.testing.assert_allclose(refined.evaluate(uv), s.evaluate(uv), atol=1e-11)
+
+
+def test_quadrilateral_rejects_bad_corners():
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    with pytest.raises(ValueError, match="not coplanar"):
+        quadrilateral(square + [[0, 0, 0], [0, 0, 0], [0, 0, 1e-3], [0, 0, 0]])
+    with pytest.raises(ValueError, match="degenerate"):
+        quadrilateral([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
+    with pytest.raises(ValueError, match=r"\(4, 3\)"):
+        quadrilateral(square[:3])
+
+
+def test_transformed_cylinder_stays_exact():
+    radius, length = 6.38, 40.0
+    R = _rotation([0.1, 0.2, 1.0], 0.4)
+    t = np.array([40.9, 24.7, -0.23])
+    s = transformed(cylinder(radius, length, 80.0, axis="y"), R, t)
+    uv = np.random.default_rng(6).uniform(0, 1, (1000, 2))
+    X = s.evaluate(uv)
+    axis = R @ [0.0, 1.0, 0.0]
+    arm = X - t
+    radial = arm - np.outer(arm @ axis, axis)
+    np.testing.assert_allclose(np.linalg.norm(radial, axis=1), radius, atol=1e-12)
+    np.testing.assert_allclose(s.normals(uv), radial / radius, atol=1e-12)
+    with pytest.raises(ValueError, match="rotation"):
+        transformed(s, np.diag([1.0, 1.0, -1.0]))
