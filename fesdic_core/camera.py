@@ -249,7 +249,8 @@ class Linearisation:
         """``(dx/dp)^T g`` (n, 6), ``p = [rvec, tvec]``, for pixel-space vectors ``g`` (n, 2)."""
         c = np.column_stack(self._camera_frame(g))
         _, dR = rodrigues(self.camera.rvec)                       # dR[i] = dR / drvec_i
-        rot = np.einsum("na,iab,nb->ni", c, dR, self.X, optimize=True)   # c . (dR_i X)
+        dRX = (self.X @ dR.reshape(9, 3).T).reshape(-1, 3, 3)     # [n, i, a] = (dR_i X)_a
+        rot = np.einsum("nia,na->ni", dRX, c)                     # c . (dR_i X)
         return np.concatenate([rot, c], axis=1)
 
     def dense(self, pull) -> np.ndarray:

@@ -95,7 +95,7 @@ def _project_and_sample(X: np.ndarray, images: Sequence, cameras: Sequence, jaco
     for image, cam in zip(images, cameras):
         x, lin = cam.linearise(X)
         with np.errstate(invalid="ignore"):
-            mask &= (lin.inv_z > 0.0) & np.isfinite(x).all(axis=1) & image.inside(x)
+            mask &= (lin.inv_z > 0.0) & image.inside(x)                 # inside() is False for NaN
         views.append((x, lin))
     for c, (image, (x, lin)) in enumerate(zip(images, views)):
         value, grad = image.evaluate_with_gradient(np.where(mask[:, None], x, 0.0))
