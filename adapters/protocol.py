@@ -13,7 +13,9 @@ code then uses them in one of two ways:
   dof numbering, one block per displacement component (:func:`reduced_basis`);
   this is how :mod:`adapters.pyxel` works.
 
-:class:`Adapter` is the structural type both adapters satisfy.
+:class:`Adapter` is the structural type of a reduced-basis host
+(:class:`adapters.pyxel.PyxelAdapter` satisfies it); a host with a solve hook needs
+only ``solve(H, b, q, scale)``, which the plugin's ``GeometricRegularization`` has.
 """
 from __future__ import annotations
 
