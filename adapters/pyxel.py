@@ -19,7 +19,7 @@ its ``MultiscaleInit``), and handles three measured quirks of pyxel-dic 2026.10:
 Integration rule of each scale: by default pyxel's pixel rule ``m.DICIntegration(cam_s)``
 (about one point per pixel of the scale in every element, the rule of pyxel's own
 examples). ``MultiscaleInit``'s rule ``m.DICIntegrationFast(n)``, n x n points in every
-element with ``n = max(mean element size // 2**s, 2)``, is available as
+element with ``n = max(int(m.GetApproxElementSize(cam)) // 2**s, 2)``, is available as
 ``integration="fast"``; on a graded mesh it under-samples the large elements (2 x 2
 points on a 10 px element at scale 1 of pyxel's composite mesh) and, without pyxel's
 Tikhonov term, the spline dofs there drift by tens of pixels.
