@@ -112,6 +112,9 @@ class GeometricRegularization:
                                  f"scales >= 0, got {bad}")
             object.__setattr__(self, "schedule", MappingProxyType(
                 {int(k): int(v) for k, v in self.schedule.items()}))
+        # C_s^T once, as csr: the projection H C_s^T runs at every Gauss-Newton step
+        object.__setattr__(self, "_transposed", tuple(sps.csr_matrix(C.T) for C in
+                                                      self.space.operators))
 
     @property
     def n_levels(self) -> int:
@@ -151,7 +154,7 @@ class GeometricRegularization:
         if H.shape != (C.shape[1], C.shape[1]) or b.shape != (C.shape[1],):
             raise ValueError(f"H {H.shape} and b {b.shape} do not match the {C.shape[1]} "
                              f"FE nodes of spline level {level}")
-        H_s = sps.csr_matrix(C @ sps.csr_matrix(H) @ C.T)  # Eq. 18
+        H_s = sps.csr_matrix(C @ (sps.csr_matrix(H) @ self._transposed[level]))  # Eq. 18
         b_s = C @ b  # Eq. 19
         return H_s, b_s
 
@@ -165,7 +168,7 @@ class GeometricRegularization:
         d_s = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T",
                             "no integration point sees spline dof {dof}")
         logger.debug("scale %d -> spline level %d: %d dofs", scale, s, d_s.size)
-        return self.operator(s).T @ d_s  # Eq. 21
+        return self._transposed[s] @ d_s  # Eq. 21
 
     def control_values(self, q: np.ndarray, level: int) -> np.ndarray:
         """Least-squares spline control values of a nodal field, (n_spline_s,).
