@@ -25,10 +25,8 @@ Run:  python examples/tutorial_operator_projection.py [--plot [FILE]]
 from __future__ import annotations
 
 import argparse
-import os
 import pathlib
 import sys
-import tempfile
 import time
 
 import numpy as np
@@ -36,6 +34,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
+from fesdic_core.atomic import atomic_path
 from fesdic_core.image import Image
 from fesdic_core.mesh import node_normals
 from fesdic_core.quadrature import pixel_quadrature
@@ -340,15 +339,11 @@ def save_figure(path: pathlib.Path, mesh, level, err_fe: np.ndarray, err_spline:
     for ax in axes:
         ax.set_aspect("equal")
         ax.set_xlabel("x (mm)")
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".",
-                               prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110)
     finally:
         plt.close(fig)
-        pathlib.Path(tmp).unlink(missing_ok=True)
 
 
 if __name__ == "__main__":

@@ -11,11 +11,11 @@ import io
 import logging
 import os
 import pathlib
-import tempfile
 
 import meshio
 import numpy as np
 
+from fesdic_core.atomic import atomic_path
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh
 
@@ -148,14 +148,6 @@ def write_mesh(path: str | os.PathLike, mesh: SurfaceMesh, point_data: dict | No
             cells.setdefault(tag, [np.ones(b.n_elements, dtype=np.int32) for b in mesh.blocks])
     out = meshio.Mesh(mesh.nodes, [(b.family.meshio_type, b.connectivity) for b in mesh.blocks],
                       point_data=points, cell_data=cells)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        with _meshio_messages(path):
-            meshio.write(tmp, out, file_format=file_format)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    with atomic_path(path) as tmp, _meshio_messages(path):
+        meshio.write(tmp, out, file_format=file_format)
     logger.info("wrote %s: %d nodes, %d elements", path, mesh.n_nodes, mesh.n_elements)

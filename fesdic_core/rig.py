@@ -31,13 +31,13 @@ import csv
 import json
 import logging
 import os
-import tempfile
 from collections.abc import Sequence
 
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from .atomic import write_text_atomic
 from .camera import Camera
 
 logger = logging.getLogger(__name__)
@@ -140,25 +140,12 @@ def read_cameras_json(path: str | os.PathLike) -> list[Camera]:
     return [_camera_from_dict(d, i, path) for i, d in enumerate(data["cameras"])]
 
 
-def _write_atomic(path: str, text: str) -> None:
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-
-
 def write_cameras_json(path: str | os.PathLike, cameras: Sequence[Camera]) -> None:
     """Write ``cameras`` to a JSON camera file (atomically; full float precision)."""
     entries = [{"name": c.name, "image_size_px": list(c.image_size), "K": c.K.tolist(),
                 "dist": c.dist.tolist(), "rvec": c.rvec.tolist(), "tvec_mm": c.tvec.tolist()}
                for c in cameras]
-    _write_atomic(os.fspath(path), json.dumps({"cameras": entries}, indent=2) + "\n")
+    write_text_atomic(path, json.dumps({"cameras": entries}, indent=2) + "\n")
 
 
 # ------------------------------------------------------------------ pyvale calibration text

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from fesdic_core.atomic import public_mode, write_bytes_atomic, write_text_atomic
+
 logger = logging.getLogger(__name__)
 
 SUMMARY_FILE = "summary.json"
@@ -43,27 +45,6 @@ CONVERGENCE_COLUMNS = ("method", "scale", "fixed_point", "stage", "iteration", "
 
 
 # --------------------------------------------------------------------------- atomic writers
-
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file of the same folder + ``os.replace``."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
-def write_text_atomic(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
-    """Write ``text`` atomically (see :func:`write_bytes_atomic`)."""
-    return write_bytes_atomic(path, text.encode(encoding))
-
 
 def _json_ready(value: Any) -> Any:
     """numpy scalars/arrays to Python; non-finite floats to None (JSON has no NaN)."""
@@ -148,6 +129,7 @@ class OutputWriter:
         if missing:
             raise RuntimeError(f"outputs announced but not written: {', '.join(missing)}")
         if not self.out_dir.exists():
+            os.chmod(staging, public_mode(directory=True))   # mkdtemp made it owner-only
             os.replace(staging, self.out_dir)                # the whole folder at once
             staging.mkdir()                                  # (rmtree target of __exit__)
         else:

@@ -55,6 +55,9 @@ def _atomic_write_text(path: pathlib.Path, text: str, newline: str | None = None
         with os.fdopen(fd, "w", encoding="ascii" if newline else "utf-8",
                        newline=newline) as f:
             f.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)                  # as a new file, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
         pathlib.Path(tmp).unlink(missing_ok=True)

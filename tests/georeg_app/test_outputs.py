@@ -149,3 +149,15 @@ def test_safe_unique_file_stems():
     assert outputs.safe_stem("Tikhonov 10 mm") == "tikhonov_10_mm"
     assert outputs.safe_stem("georeg (multiscale)") == "georeg_multiscale"
     assert outputs.safe_stem("../../etc") == "etc" and outputs.safe_stem("***") == "method"
+
+
+def test_published_folder_and_files_are_readable_by_others(tmp_path):
+    import stat
+    old = os.umask(0o022)
+    try:
+        with OutputWriter(tmp_path / "run") as w:
+            w.write_text("report.html", "<html></html>")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(os.stat(tmp_path / "run").st_mode) == 0o755
+    assert stat.S_IMODE(os.stat(tmp_path / "run" / "report.html").st_mode) == 0o644

@@ -1,0 +1,40 @@
+"""Atomic output files (fesdic_core.atomic): all or nothing, with a new file's permissions."""
+import os
+import stat
+
+import pytest
+
+from fesdic_core.atomic import atomic_path, public_mode, write_bytes_atomic, write_text_atomic
+
+
+def _mode(path):
+    return stat.S_IMODE(os.stat(path).st_mode)
+
+
+def test_written_files_have_the_permissions_of_a_new_file(tmp_path):
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "a.txt", "hello")
+        write_bytes_atomic(tmp_path / "b.bin", b"\x00\x01")
+        assert _mode(tmp_path / "a.txt") == _mode(tmp_path / "b.bin") == 0o644 == public_mode()
+        assert public_mode(directory=True) == 0o755
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").read_text() == "hello"
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    target = tmp_path / "mesh.vtu"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            assert tmp.suffix == ".vtu" and tmp.parent == tmp_path
+            tmp.write_text("half")
+            raise RuntimeError("interrupted")
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mesh.vtu"]
+
+
+def test_missing_folder_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        write_text_atomic(tmp_path / "nowhere" / "x.txt", "x")
