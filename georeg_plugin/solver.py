@@ -12,6 +12,11 @@ spline space of level ``s``:
 (``solve(H, b, q, scale) -> d``); it holds only the (immutable) multilevel space and
 the schedule image scale -> spline level, so it is stateless: the spline control
 values of the current shape are recovered from ``q`` by ``control_values``.
+
+A spline dof that no integration point sees (its support lies in a hole of a legacy
+mesh, or in a region masked in the images) makes ``C_s H C_s^T`` singular: by default
+this is an error naming the dof; with ``hold_unseen=True`` such dofs (zero diagonal
+term) keep their value and the step is solved for the others.
 """
 from __future__ import annotations
 
@@ -95,10 +100,14 @@ class GeometricRegularization:
     schedule : mapping image scale -> spline level, optional
         Default ``level = min(scale, n_levels - 1)``: the coarsest images use the
         coarsest splines (Fig. 5).
+    hold_unseen : bool
+        Keep the dofs with a zero diagonal term of ``C_s H C_s^T`` (seen by no
+        integration point) fixed instead of raising :class:`SingularProjectionError`.
     """
 
     space: "MultilevelSpace"
     schedule: Mapping[int, int] | None = None
+    hold_unseen: bool = False
 
     def __post_init__(self) -> None:
         n_levels = len(self.space.operators)
@@ -165,8 +174,19 @@ class GeometricRegularization:
         """
         s = self.level(scale)
         H_s, b_s = self.project(H, b, s)
-        d_s = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T",
-                            "no integration point sees spline dof {dof}")
+        hint = "no integration point sees spline dof {dof}"
+        if self.hold_unseen:
+            diag = np.abs(H_s.diagonal())
+            seen = diag > _ZERO_PIVOT * (diag.max() if diag.size else 0.0)
+            if not seen.all():
+                logger.debug("level %d: %d of %d spline dofs unseen, held", s,
+                             np.count_nonzero(~seen), seen.size)
+                d_s = np.zeros(seen.size)
+                if seen.any():
+                    d_s[seen] = _sparse_solve(H_s[seen][:, seen], b_s[seen], s,
+                                              "projected Hessian C_s H C_s^T", hint)
+                return self.operator(s).T @ d_s  # Eq. 21
+        d_s = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T", hint)
         logger.debug("scale %d -> spline level %d: %d dofs", scale, s, d_s.size)
         return self._transposed[s] @ d_s  # Eq. 21
 

@@ -131,3 +131,23 @@ def test_mismatched_sizes_are_rejected(two_levels):
     reg = GeometricRegularization(space)
     with pytest.raises(ValueError, match="do not match"):
         reg.solve(sps.identity(5, format="csr"), np.ones(5), np.zeros(5), 0)
+
+
+def test_hold_unseen_keeps_unseen_dofs_and_solves_the_others(two_levels):
+    space, rng = two_levels
+    C = space.operators[0]
+    unseen = 3
+    mask = (C[unseen].toarray().ravel() == 0).astype(float)    # nodes where dof 3 does not live
+    H = sps.csr_matrix(sps.diags(mask) @ _random_spd(space.n_fe, rng) @ sps.diags(mask))
+    b = mask * rng.standard_normal(space.n_fe)
+    d = GeometricRegularization(space, hold_unseen=True).solve(H, b, np.zeros(space.n_fe), 0)
+    # the same step as the dense formula on the space without dof 3
+    keep = np.arange(C.shape[0]) != unseen
+    Ck = C.toarray()[keep]
+    expected = Ck.T @ np.linalg.solve(Ck @ H.toarray() @ Ck.T, Ck @ b)
+    assert_allclose(d, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    # seen everywhere: identical to the default solver
+    H = _random_spd(space.n_fe, rng)
+    b = rng.standard_normal(space.n_fe)
+    assert_allclose(GeometricRegularization(space, hold_unseen=True).solve(H, b, b, 1),
+                    GeometricRegularization(space).solve(H, b, b, 1), rtol=1e-12)
