@@ -22,7 +22,7 @@ from fesdic_core.accuracy import shape_error_to_surface
 from fesdic_core.driver import Measurement, MeasurementSettings, measure
 from fesdic_core.gauge import best_fit_plane_distance, move_cameras_with_specimen
 from fesdic_core.image import Image, read_image
-from fesdic_core.mesh import SurfaceMesh
+from fesdic_core.mesh import SurfaceMesh, validate_mesh
 from fesdic_core.mesh_io import read_mesh
 from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm_for, twisted_plate
 from fesdic_core.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
@@ -117,6 +117,7 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
     """
     if geometry.kind == "mesh":
         mesh = read_mesh(geometry.file)
+        validate_mesh(mesh, str(geometry.file))                   # errors name the file
         lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
         if hi[2] - lo[2] > 1e-6 * np.ptp(mesh.nodes[:, :2]):
             raise ValueError(f"{geometry.file}: kind = 'mesh' takes a flat mesh in z = 0 "

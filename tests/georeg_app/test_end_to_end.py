@@ -1,0 +1,135 @@
+"""`georeg measure` end to end with the real pipeline: files in, files out, and bad inputs.
+
+A small rendered stereo pair (640 x 480 px, the session's twisted plate) is written to disk
+as a user would have it: two PNG images, a JSON camera file and a TOML configuration.
+"""
+import dataclasses
+import json
+
+import cv2
+import meshio
+import numpy as np
+import pytest
+
+from fesdic_core.accuracy import shape_error_to_surface
+from fesdic_core.mesh import rectangle_mesh
+from fesdic_core.mesh_io import write_mesh
+from fesdic_core.rig import write_cameras_json
+from georeg_app import cli
+
+CONFIG = """
+[images]
+cam0 = "{cam0}"
+cam1 = "{cam1}"
+[cameras]
+file = "{cameras}"
+[geometry]
+{geometry}
+[method]
+name = "georeg"
+levels = 2
+scales = 2
+calibrate = false
+"""
+RECTANGLE = 'kind = "rectangle"\nlength_mm = 60.0\nwidth_mm = 40.0\nelements = 24'
+
+
+@pytest.fixture(scope="module")
+def case(twisted_scene, tmp_path_factory):
+    specimen, cameras, images = twisted_scene
+    folder = tmp_path_factory.mktemp("user_data")
+    for k, image in enumerate(images):
+        cv2.imwrite(str(folder / f"cam{k}.png"), image.values.astype(np.uint8))
+    write_cameras_json(folder / "cameras.json", cameras)
+    return folder, specimen, cameras, images
+
+
+def _config(folder, name="config.toml", cam0="cam0.png", cam1="cam1.png", cameras="cameras.json",
+            geometry=RECTANGLE):
+    path = folder / name
+    path.write_text(CONFIG.format(cam0=cam0, cam1=cam1, cameras=cameras, geometry=geometry))
+    return path
+
+
+def _fails_naming(capsys, config, out, *names):
+    assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("georeg: error: "), err
+    for name in names:
+        assert name in err[0], (name, err[0])
+    assert not out.exists()
+    return err[0]
+
+
+def test_measure_writes_a_shape_that_matches_the_truth(case, tmp_path, capsys):
+    folder, specimen, _, _ = case
+    out = tmp_path / "out"
+    assert cli.main(["-q", "measure", str(_config(folder)), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["truth_available"] is False
+    (method,) = summary["methods"]
+    assert method["name"] == "georeg" and method["shape_rms_error_mm"] is None
+    assert method["iterations"] > 0 and 0 < method["residual_percent"] < 5
+    vtu = meshio.read(out / method["mesh_file"])
+    assert {"shape_correction_mm", "distance_to_bfp_mm"} <= set(vtu.point_data)
+    error = shape_error_to_surface(vtu.points, specimen)          # modulo a rigid motion
+    assert np.sqrt(np.mean(error ** 2)) < 0.02 * 0.5, np.sqrt(np.mean(error ** 2))
+    # the correction itself: the twist z = k x y (0.5 mm at the corners) along +z
+    x, y = vtu.points[:, 0], vtu.points[:, 1]
+    twist = 0.5 * x * y / (30.0 * 20.0)
+    q = vtu.point_data["shape_correction_mm"]
+    assert np.sqrt(np.mean((q - q.mean() - (twist - twist.mean())) ** 2)) < 0.02
+    assert {p.name for p in out.iterdir()} >= {"summary.json", "report.html", "convergence.csv",
+                                               method["mesh_file"]}
+
+
+def test_missing_image_is_named(case, tmp_path, capsys):
+    folder = case[0]
+    _fails_naming(capsys, _config(folder, "c1.toml", cam1="nowhere.png"), tmp_path / "out",
+                  "nowhere.png")
+
+
+def test_images_of_different_sizes_are_named(case, tmp_path, capsys):
+    folder, _, _, images = case
+    cv2.imwrite(str(tmp_path / "small.png"), images[1].values[:400, :600].astype(np.uint8))
+    _fails_naming(capsys, _config(folder, "c2.toml", cam1=str(tmp_path / "small.png")),
+                  tmp_path / "out", "small.png", "different sizes")
+
+
+def test_nan_in_an_image_is_named(case, tmp_path, capsys):
+    folder, _, _, images = case
+    values = images[1].values.astype(np.float32)
+    values[100, 200] = np.nan
+    cv2.imwrite(str(tmp_path / "nan.tiff"), values)
+    _fails_naming(capsys, _config(folder, "c3.toml", cam1=str(tmp_path / "nan.tiff")),
+                  tmp_path / "out", "nan.tiff", "non-finite")
+
+
+def test_calibration_missing_a_field_is_named(case, tmp_path, capsys):
+    folder = case[0]
+    data = json.loads((folder / "cameras.json").read_text())
+    del data["cameras"][1]["tvec_mm"]
+    (tmp_path / "cams.json").write_text(json.dumps(data))
+    _fails_naming(capsys, _config(folder, "c4.toml", cameras=str(tmp_path / "cams.json")),
+                  tmp_path / "out", "cams.json", "tvec_mm")
+
+
+def test_degenerate_element_is_named(case, tmp_path, capsys):
+    folder = case[0]
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, "Q4")
+    nodes = mesh.nodes.copy()
+    conn = mesh.blocks[0].connectivity
+    nodes[conn[7, 2]] = nodes[conn[7, 0]]                         # element 7 folds onto a line
+    write_mesh(tmp_path / "bad.vtu", dataclasses.replace(mesh, nodes=nodes))
+    line = _fails_naming(capsys, _config(folder, "c5.toml", geometry=f'kind = "mesh"\nfile = '
+                                         f'"{tmp_path / "bad.vtu"}"'), tmp_path / "out", "bad.vtu", "elements 7,")
+    assert "degenerate" in line or "inverted" in line
+
+
+def test_mesh_outside_the_images_is_named(case, tmp_path, capsys):
+    folder = case[0]
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, "Q4", center=(500.0, 0.0))
+    write_mesh(tmp_path / "far.vtu", mesh)
+    _fails_naming(capsys, _config(folder, "c6.toml", geometry=f'kind = "mesh"\nfile = '
+                                  f'"{tmp_path / "far.vtu"}"'), tmp_path / "out",
+                  "outside", "cam0")
