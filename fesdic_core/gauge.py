@@ -71,8 +71,9 @@ def tangential_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.
     # metres and radians on a comparable footing: rotations times the surface radius
     radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=node_weights)))
     scale = np.r_[np.ones(3), np.full(3, radius)]
-    _, sv, vt = np.linalg.svd(modes / scale * np.sqrt(node_weights)[:, None], full_matrices=True)
-    sv = np.r_[sv, np.zeros(6 - sv.size)]
+    A = modes / scale * np.sqrt(node_weights)[:, None]
+    A = np.vstack([A, np.zeros((max(0, 6 - len(A)), 6))])        # at least 6 rows: vt is 6 x 6
+    _, sv, vt = np.linalg.svd(A, full_matrices=False)
     return (vt[sv <= rtol * sv.max()] / scale).T, centre
 
 

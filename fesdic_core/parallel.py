@@ -10,6 +10,7 @@ most 8); 1 runs everything on the calling thread.
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
@@ -18,13 +19,27 @@ __all__ = ["THREADS", "for_each_block"]
 THREADS = max(1, int(os.environ.get("FESDIC_THREADS", min(os.cpu_count() or 1, 8))))
 
 
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The threads of the core, started on first use and kept (no start-up cost per call)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(THREADS, thread_name_prefix="fesdic")
+    return _POOL
+
+
 def for_each_block(work: Callable[[slice], None], n: int, block: int) -> None:
-    """Call ``work(span)`` for consecutive spans of ``block`` items covering ``range(n)``."""
+    """Call ``work(span)`` for consecutive spans of ``block`` items covering ``range(n)``.
+
+    Blocks run on the core's threads; a call from one of those threads (nested blocks)
+    runs its blocks in line, so the pool never waits on itself.
+    """
     spans = [slice(a, min(a + block, n)) for a in range(0, n, block)]
-    if THREADS == 1 or len(spans) < 2:
+    if THREADS == 1 or len(spans) < 2 or threading.current_thread().name.startswith("fesdic"):
         for span in spans:
             work(span)
         return
-    with ThreadPoolExecutor(min(THREADS, len(spans))) as pool:
-        for _ in pool.map(work, spans):                      # re-raises a block's exception
-            pass
+    for _ in _pool().map(work, spans):                         # re-raises a block's exception
+        pass

@@ -7,6 +7,7 @@ sub-cell and weighs the sub-cell's area on the nominal surface (mm^2).
 """
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 from functools import cached_property
@@ -106,9 +107,15 @@ class PixelQuadrature:
     def element_sum(self, values: np.ndarray) -> np.ndarray:
         """(n_elements,) sums of point values ``values`` (g,) over each element."""
         out = np.zeros(self.n_elements)
-        for group in self.groups:
-            out[group.elements] = values[group.span].reshape(len(group.elements), -1).sum(axis=1)
+        starts, order = self._element_runs
+        out[order] = np.add.reduceat(values, starts)        # each element's points are a run
         return out
+
+    @cached_property
+    def _element_runs(self) -> tuple[np.ndarray, np.ndarray]:
+        """First point of each element's run of points, and the element of each run."""
+        starts = [g.start + g.points_per_element * np.arange(len(g.elements)) for g in self.groups]
+        return np.concatenate(starts), np.concatenate([g.elements for g in self.groups])
 
     @cached_property
     def L(self) -> sps.csr_matrix:
@@ -167,6 +174,19 @@ def subdivisions(nodes: np.ndarray, connectivity: np.ndarray, reference: str, ca
     return np.clip(np.ceil(size * points_per_px).astype(int), 1, max_subdivision)
 
 
+@functools.lru_cache(maxsize=4096)
+def _reference_rule(family, n0: int, n1: int) -> tuple:
+    """Sub-cell centres, parent areas, shape functions (m, nn) and derivatives (m, nn, 2).
+
+    The same few subdivisions recur for every scale and every run on a mesh: cached.
+    """
+    xi, parent_area = _subcell_centres(family.reference, (n0, n1))
+    out = (xi, parent_area, family.shape_functions(xi), family.shape_derivatives(xi))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 def pixel_quadrature(mesh: SurfaceMesh, cameras: Sequence, points_per_px: float = 1.0,
                      nodes: np.ndarray | None = None, max_subdivision: int = 2000) -> PixelQuadrature:
     """Build the Riemann-sum quadrature of ``mesh`` for the given (scaled) cameras.
@@ -191,9 +211,7 @@ def pixel_quadrature(mesh: SurfaceMesh, cameras: Sequence, points_per_px: float 
                              max_subdivision)
         for n in np.unique(n_sub, axis=0):
             members = np.flatnonzero(np.all(n_sub == n, axis=1))
-            xi, parent_area = _subcell_centres(family.reference, (int(n[0]), int(n[1])))
-            N = family.shape_functions(xi)                                   # (m, nn)
-            dN = family.shape_derivatives(xi)                                # (m, nn, 2)
+            xi, parent_area, N, dN = _reference_rule(family, int(n[0]), int(n[1]))
             m = len(xi)
             Xe = mesh.nodes[conn[members]]                                   # (e, nn, 3)
             J = dN.transpose(0, 2, 1).reshape(2 * m, -1) @ Xe                # (e, 2m, 3)

@@ -133,7 +133,11 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
     g = len(X)
     mask = np.ones(g, dtype=bool) if extra_mask is None else np.array(extra_mask, dtype=bool)
     f = np.empty((2, g))
-    pull = np.empty((2, g, {"point": 3, "extrinsic": 6, None: 0}[jacobian]))
+    k = {"point": 3, "extrinsic": 6, None: 0}[jacobian]
+    if jacobian == "extrinsic":                       # pull[c] (g, k); dr_dp (g, 2k) = [p0, p1]
+        pull = np.empty((g, 2, k)).transpose(1, 0, 2)
+    else:                                             # dr_dX = pull[0], contiguous
+        pull = np.empty((2, g, k))
     for_each_block(lambda b: _project_and_sample(X[b], images, cameras, jacobian, mask[b],
                                                  f[:, b], pull[:, b]), g, _BLOCK)
     dyn = float(images[0].dynamic_range)
@@ -152,5 +156,6 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
 
     for_each_block(normalise, g, _BLOCK)
     return GrayLevelResidual(r=r, mask=mask, dr_dX=pull[0] if jacobian == "point" else None,
-                             dr_dp=np.hstack([pull[0], pull[1]]) if jacobian == "extrinsic" else None,
+                             dr_dp=pull.transpose(1, 0, 2).reshape(g, 2 * k)
+                             if jacobian == "extrinsic" else None,
                              sigma0=s0, dynamic_range=dyn)
