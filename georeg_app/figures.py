@@ -146,7 +146,11 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
     nx = int(min(cells_along_length, max(2, np.sqrt(0.5 * n_points * span[0] / span[1]))))
     bins = (nx, max(1, int(round(nx * span[1] / span[0]))))
     ranges = [[lo[0], hi[0]], [lo[1], hi[1]]]
-    vmax = max((float(np.percentile(np.abs(p), 99)) for _, p in fields if p.size), default=1.0) or 1.0
+    # colour range: the median over methods of the 99th percentile of |r|, so that the noise
+    # floor of the good methods shows and a poor method saturates (arrows of the colour bar)
+    tops = [float(np.percentile(np.abs(p), 99)) for _, p in fields if p.size]
+    vmax = float(np.median(tops)) if tops else 1.0
+    vmax = vmax if vmax > 0 else 1.0
     nrows, ncols = _grid(len(results))
     fig = Figure(figsize=(4.6 * ncols, (4.6 * span[1] / span[0] + 0.9) * nrows))
     image = None
@@ -161,7 +165,7 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
         ax.set_aspect("equal")
     fig.suptitle("Gray-level residual (% of the image dynamic range)")
     if image is not None:
-        fig.colorbar(image, ax=fig.axes, shrink=0.8, label="residual (%)")
+        fig.colorbar(image, ax=fig.axes, shrink=0.8, label="residual (%)", extend="both")
     return _png(fig)
 
 
