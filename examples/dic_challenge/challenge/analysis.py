@@ -154,24 +154,22 @@ def radius_by_arc(points: np.ndarray, fit: CylinderFit, half_angles=(20.0, 30.0,
 
 
 def surface_distance(points: np.ndarray, reference: np.ndarray, axis: np.ndarray,
-                     border_mm: float = 0.5) -> np.ndarray:
+                     border_mm: float = 0.5, step_mm: float = 0.05) -> np.ndarray:
     """Normal distance (n,) from ``points`` to the surface sampled by ``reference`` (m, 3).
 
     Both are seen as heights over the plane spanned by ``axis`` and the lateral direction;
     the reference height is interpolated linearly (Delaunay) at the points, and the height
-    difference is multiplied by the cosine of the local slope. NaN outside the reference
-    (and within ``border_mm`` of its lateral edges).
+    difference is multiplied by the cosine of the local lateral slope (central difference
+    over ``step_mm``). NaN outside the reference and within ``border_mm`` of its lateral edges.
     """
     a = _unit(np.asarray(axis, float))
     lateral = _unit(np.cross(a, [0.0, 0.0, 1.0]))
-    up = np.cross(lateral, a)
-    frame = np.array([a, lateral, up])
+    frame = np.array([a, lateral, np.cross(lateral, a)])
     P, Q = points @ frame.T, reference @ frame.T
-    height = LinearNDInterpolator(Q[:, :2], Q[:, 2])(P[:, :2])
-    lo, hi = np.percentile(Q[:, 1], [0.0, 100.0])
-    height[(P[:, 1] < lo + border_mm) | (P[:, 1] > hi - border_mm)] = np.nan
-    # local slope of the reference along the lateral direction (finite difference)
-    step = 0.05
     interp = LinearNDInterpolator(Q[:, :2], Q[:, 2])
-    slope = (interp(P[:, :2] + [0, step]) - interp(P[:, :2] - [0, step])) / (2 * step)
-    return (P[:, 2] - height) / np.sqrt(1.0 + slope ** 2)
+    offsets = np.array([[0.0, 0.0], [0.0, step_mm], [0.0, -step_mm]])
+    h0, hp, hm = interp((P[None, :, :2] + offsets[:, None]).reshape(-1, 2)).reshape(3, -1)
+    lo, hi = Q[:, 1].min(), Q[:, 1].max()
+    h0[(P[:, 1] < lo + border_mm) | (P[:, 1] > hi - border_mm)] = np.nan
+    slope = (hp - hm) / (2 * step_mm)
+    return (P[:, 2] - h0) / np.sqrt(1.0 + slope ** 2)

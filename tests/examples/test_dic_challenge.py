@@ -1,0 +1,136 @@
+"""The Stereo DIC Challenge example on the real stereo pair (examples/dic_challenge).
+
+End to end at coarse image scales (2, 1): block height and base flatness against stated
+bounds; the pieces (configuration errors, occlusion by ray casting, the crop of the
+images, the figures of merit on exact shapes) on their own.
+"""
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parents[2] / "examples" / "dic_challenge"
+sys.path.insert(0, str(HERE))
+
+from challenge import analysis                                       # noqa: E402
+from challenge.config import ConfigError, load_face                  # noqa: E402
+from challenge.geometry import ConvexSolid, feature_solid, face_model  # noqa: E402
+from challenge.measure import initial_cameras, load_images, measure_nominal  # noqa: E402
+from challenge.pipeline import compare, run_challenge                # noqa: E402
+from challenge.visibility import hidden_by                           # noqa: E402
+
+#: laser scan of the challenge (data README): block top 6.36 mm above the base plate
+BLOCK_HEIGHT_MM, BLOCK_TOL_MM = 6.36, 0.03
+#: pyvale's noise floor on the base plate (issue 5): RMS to the best-fit quadric
+BASE_QUADRIC_UM = 3.6
+
+
+@pytest.fixture(scope="module")
+def coarse_run():
+    run = run_challenge(HERE, ("base", "block_top"), scales=(2, 1))
+    return run, compare(run)
+
+
+def test_real_pair_block_height_and_base_flatness(coarse_run):
+    run, c = coarse_run
+    assert abs(c.block.height_mm - BLOCK_HEIGHT_MM) <= BLOCK_TOL_MM
+    # flatness of the base region of the data README: below pyvale's noise floor to a
+    # quadric, and a plate that is not flat to a plane (the bow pyvale sees: 7.9 um)
+    assert c.base_quadric_rms_mm * 1e3 < BASE_QUADRIC_UM
+    assert 5.0 < c.base_plane_rms_mm * 1e3 < 12.0
+    # the images match: residual below 2.5% of the dynamic range at scale 1
+    assert all(r < 2.5 for r in c.residual_percent.values())
+    # the block's solids mask the strips it hides from one camera, but not most of the plate
+    assert 0.001 < c.masked_fraction["base"] < 0.05
+    # every result is in the frame of the measured base plane (z = 0)
+    base = run.results["base"].points_mm[run.results["base"].seen]
+    assert abs(base[:, 2].mean()) < 1e-3
+
+
+def test_crop_gives_the_same_surface():
+    face = load_face(HERE / "block_top.toml")
+    crop = (200, 800, 600, 560)                         # around the block, both views
+    full = load_images(face.specimen)
+    cams = initial_cameras(face.specimen, full)
+    cropped = load_images(face.specimen, crop)
+    cams_c = initial_cameras(face.specimen, cropped, crop)
+    X = np.array([lm.xyz_mm for lm in face.specimen.landmarks])
+    for a, b in zip(cams, cams_c):                      # same pose, pixels shifted by the crop
+        np.testing.assert_allclose(b.project(X), a.project(X) - crop[:2], atol=1e-6)
+    a = measure_nominal(face, face.nominals[0], full, cams, scales=(2, 1))
+    b = measure_nominal(face, face.nominals[0], cropped, cams_c, scales=(2, 1))
+    assert np.max(np.abs(a.nodes_mm - b.nodes_mm)) < 2e-3
+
+
+def test_ray_casting_hides_the_strip_behind_a_box():
+    box = ConvexSolid("box", np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]]),
+                      np.array([-1, -1, -1, -1, -2, 0.0]), np.array([[-1, -1, 0], [1, 1, 2.0]]))
+    camera = np.array([100.0, 0.0, 100.0])
+    x = np.linspace(-5, 5, 1001)
+    X = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    hidden = hidden_by(X, camera, box)
+    # the ray from (x, 0, 0) grazes the top edge (-1, 0, 2) when x + 2 (100 - x) / 100 = -1;
+    # points under the box (|x| <= 1) are inside it
+    np.testing.assert_array_equal(hidden, (x >= -3.0 / 0.98 - 1e-9) & (x <= 1.0 + 1e-9))
+    # points on the box's top face see the camera
+    top = np.column_stack([x[np.abs(x) < 0.9], np.zeros(np.sum(np.abs(x) < 0.9)), np.full(np.sum(np.abs(x) < 0.9), 2.0 + 1e-9)])
+    assert not hidden_by(top, camera, box).any()
+
+
+def test_base_mesh_has_the_features_cut_out():
+    face = load_face(HERE / "base.toml")
+    nominal = face.nominals[0]
+    solids = tuple(feature_solid(face.specimen.feature(h)) for h in nominal.holes)
+    model = face_model(nominal, solids)
+    for s in solids:
+        assert not s.inflated(0.5).contains(model.mesh.nodes).any(), s.name
+    assert model.uv.shape == (model.mesh.n_nodes, 2)
+
+
+def test_figures_of_merit_on_exact_shapes():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-20, 20, (4000, 2))
+    bowl = np.column_stack([xy, 1e-4 * xy[:, 0] ** 2 - 2e-4 * xy[:, 0] * xy[:, 1] + 0.01 * xy[:, 1]])
+    assert analysis.rms(analysis.quadric_residuals(bowl)) < 1e-5      # 10 nm: tilt of the fit frame
+    assert analysis.rms(analysis.plane_residuals(bowl)) > 1e-3
+    # a tilted cylinder of radius 6.2 over 80 degrees of arc: radius, axis and crest recovered
+    r, axis = 6.2, np.array([1.0, 0.02, 0.0]) / np.hypot(1.0, 0.02)
+    t, a = rng.uniform(-20, 20, 5000), np.radians(rng.uniform(-40, 40, 5000))
+    lateral = np.cross(axis, [0, 0, 1.0])
+    P = np.array([3.0, 40.0, -0.1]) + np.outer(t, axis) + r * (np.outer(np.sin(a), lateral)
+                                                               + np.outer(np.cos(a), [0, 0, 1.0]))
+    fit = analysis.fit_cylinder(P, [1.0, 0.0, 0.0], 6.6)
+    assert fit.radius_mm == pytest.approx(r, abs=1e-9)
+    assert fit.crest_height_mm == pytest.approx(r - 0.1, abs=1e-9)
+    assert fit.rms_mm < 1e-9
+    imposed = analysis.fit_cylinder(P, axis, 6.6, radius=6.6)
+    assert imposed.rms_mm > 1e-2
+    # distance to the same cylinder sampled on a grid (0.2 mm x 0.8 deg), and to a copy
+    # of radius r + 5 um: 0 and -5 um along the normal
+    tg, ag = np.meshgrid(np.linspace(-20, 20, 201), np.radians(np.linspace(-40, 40, 101)))
+
+    def surface(radius):
+        return np.array([3.0, 40.0, -0.1]) + np.outer(tg.ravel(), axis) + radius * (
+            np.outer(np.sin(ag.ravel()), lateral) + np.outer(np.cos(ag.ravel()), [0, 0, 1.0]))
+
+    inner = (np.abs(t) < 19) & (np.abs(a) < np.radians(38))
+    for offset in (0.0, 5e-3):
+        d = analysis.surface_distance(P[inner], surface(r + offset), axis)
+        assert np.isfinite(d).mean() > 0.8          # 0.5 mm lateral border excluded
+        np.testing.assert_allclose(d[np.isfinite(d)], -offset, atol=2e-4)
+
+
+def test_config_errors_name_the_file_and_key(tmp_path):
+    text = (HERE / "block_top.toml").read_text().replace('specimen = "specimen.toml"',
+                                                        f'specimen = "{HERE / "specimen.toml"}"')
+    bad = tmp_path / "face.toml"
+    bad.write_text(text.replace("levels = 3", "levels = 3\nlevles = 2"))
+    with pytest.raises(ConfigError, match=r"face.toml: \[\[nominal\]\]\[0\] levles: unknown key \(did you mean levels"):
+        load_face(bad)
+    bad.write_text(text.replace("elements = [8, 8]", "elements = [6, 8]"))
+    with pytest.raises(ConfigError, match="elements: .* multiples"):
+        load_face(bad)
+    bad.write_text(text.replace('kind = "quadrilateral"', 'kind = "sphere"'))
+    with pytest.raises(ConfigError, match="kind: expected one of quadrilateral, cylinder"):
+        load_face(bad)
