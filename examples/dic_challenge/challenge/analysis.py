@@ -99,22 +99,23 @@ class CylinderFit:
     angle_deg: np.ndarray         # (n,) angle of each point about the axis from the crest
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
+def unit(v: np.ndarray) -> np.ndarray:
+    """``v`` / ``|v|``."""
     return v / np.linalg.norm(v)
 
 
 def fit_cylinder(points: np.ndarray, axis_guess: np.ndarray, radius_guess: float,
                  radius: float | None = None) -> CylinderFit:
     """Least-squares cylinder through ``points`` (n, 3); ``radius`` fixes it if given."""
-    a0 = _unit(np.asarray(axis_guess, float))
-    e1 = _unit(np.cross(a0, [0.0, 0.0, 1.0]))      # lateral
+    a0 = unit(np.asarray(axis_guess, float))
+    e1 = unit(np.cross(a0, [0.0, 0.0, 1.0]))      # lateral
     e2 = np.cross(e1, a0)                           # up, normal to the axis
     c = points.mean(axis=0)
     span = (points - c) @ a0
     mid = c + 0.5 * (span.max() + span.min()) * a0
 
     def geometry(p):
-        d = _unit(a0 + p[0] * e1 + p[1] * e2)
+        d = unit(a0 + p[0] * e1 + p[1] * e2)
         o = mid + p[2] * e1 + p[3] * e2
         return d, o
 
@@ -125,17 +126,16 @@ def fit_cylinder(points: np.ndarray, axis_guess: np.ndarray, radius_guess: float
         return np.linalg.norm(arm - np.outer(arm @ d, d), axis=1) - r
 
     r0 = radius_guess if radius is None else radius
-    top = points[:, 2].max()
-    p0 = np.array([0.0, 0.0, 0.0, (top - r0) - mid[2], r0])
-    # start the axis below the highest points by one radius
-    fit = least_squares(residual, p0 if radius is None else p0, x_scale="jac", method="lm")
+    # start: the nominal direction, the axis one radius below the highest point
+    p0 = np.array([0.0, 0.0, 0.0, points[:, 2].max() - r0 - mid[2], r0])
+    fit = least_squares(residual, p0, x_scale="jac", method="lm")
     d, o = geometry(fit.x)
     d = d if d @ a0 > 0 else -d
     r = float(fit.x[4]) if radius is None else float(radius)
     arm = points - o
     radial = arm - np.outer(arm @ d, d)
-    up = np.cross(_unit(np.cross(d, [0.0, 0.0, 1.0])), d)
-    lateral = _unit(np.cross(d, [0.0, 0.0, 1.0]))
+    up = np.cross(unit(np.cross(d, [0.0, 0.0, 1.0])), d)
+    lateral = unit(np.cross(d, [0.0, 0.0, 1.0]))
     angle = np.degrees(np.arctan2(radial @ lateral, radial @ up))
     crest = float(o[2] + r * np.sqrt(1.0 - d[2] ** 2))
     return CylinderFit(r, o, d, crest, rms(fit.fun), fit.fun, angle)
@@ -162,8 +162,8 @@ def surface_distance(points: np.ndarray, reference: np.ndarray, axis: np.ndarray
     difference is multiplied by the cosine of the local lateral slope (central difference
     over ``step_mm``). NaN outside the reference and within ``border_mm`` of its lateral edges.
     """
-    a = _unit(np.asarray(axis, float))
-    lateral = _unit(np.cross(a, [0.0, 0.0, 1.0]))
+    a = unit(np.asarray(axis, float))
+    lateral = unit(np.cross(a, [0.0, 0.0, 1.0]))
     frame = np.array([a, lateral, np.cross(lateral, a)])
     P, Q = points @ frame.T, reference @ frame.T
     interp = LinearNDInterpolator(Q[:, :2], Q[:, 2])

@@ -171,6 +171,13 @@ def _count(v: Any) -> int:
     return v
 
 
+def _scales(v: Any) -> tuple[int, ...]:
+    if not isinstance(v, list) or not v or any(isinstance(x, bool) or not isinstance(x, int) or x < 0
+                                               for x in v):
+        raise TypeError
+    return tuple(v)
+
+
 def _array(shape: tuple[int, ...]) -> Callable[[Any], np.ndarray]:
     def convert(v: Any) -> np.ndarray:
         a = np.array(v, dtype=object)
@@ -317,8 +324,7 @@ def load_face(path: str | Path) -> Face:
     m = _Table(top.take("method", dict, "a table", {}), "[method]", source)
     d = Method()
     method = Method(
-        scales=m.take("scales", lambda v: tuple(_count(x + 1) - 1 for x in v), "a list of integers >= 0",
-                      d.scales),
+        scales=m.take("scales", _scales, "a list of integers >= 0", d.scales),
         max_fixed_point=m.take("max_fixed_point", _count, "an integer >= 1", d.max_fixed_point),
         max_iter=m.take("max_iter", _count, "an integer >= 1", d.max_iter),
         points_per_px=m.take("points_per_px", _positive, "a number > 0", d.points_per_px),

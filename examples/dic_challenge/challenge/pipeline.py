@@ -137,7 +137,7 @@ def compare(run: ChallengeRun) -> Comparison:
             rms_d, mean_d = analysis.rms(d), float(np.mean(d))
         ring = _ring(base, face.specimen.feature(name), base_face.analysis.ring_mm)
         centre, axes = analysis.plane_frame(ring)
-        up = np.cross(analysis._unit(np.cross(fit.axis_direction, [0.0, 0.0, 1.0])), fit.axis_direction)
+        up = np.cross(analysis.unit(np.cross(fit.axis_direction, [0.0, 0.0, 1.0])), fit.axis_direction)
         crest = float((fit.axis_point_mm + fit.radius_mm * up - centre) @ axes[2])
         below = float(-(fit.axis_point_mm - centre) @ axes[2])
         fixed = {f"{who} {radii[name]:g} mm": analysis.fit_cylinder(P, fit.axis_direction, radii[name],
