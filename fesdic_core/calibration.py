@@ -66,7 +66,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
-                         residual_rtol: float = 1e-5,
+                         residual_rtol: float = 1e-4, tol_px: float | None = None,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
                          context: dict | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
@@ -76,10 +76,13 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     stereo : (R, t), optional
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
+    tol_px : optional, also stop when an update moves the projections of the points by
+        less than this (px of the images given): the pose no longer changes what is seen.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     residual_rtol : also stop when the residual changes by less than this fraction.
     """
     cams = list(cameras)
+    probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # measures a step in px
     converged, it, previous = False, 0, np.inf
     for it in range(1, max_iter + 1):
         res = gray_level_residual(X, quad, images, cams, normalisation, "extrinsic", extra_mask)
@@ -92,6 +95,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         w = np.where(res.mask, quad.weight_mm2, 0.0)
         M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
         dp = truncated_solve(M, -(G.T @ (w * res.r)), rcond, frozen)
+        before = cams
         if stereo is None:
             cams = [c.with_extrinsics(c.extrinsics + dp[6 * k:6 * k + 6]) for k, c in enumerate(cams)]
         else:
@@ -99,12 +103,15 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             cams = [cam0, place_camera1(cam0, cams[1], *stereo)]
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
+        shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
+                    for a, b in zip(cams, before)) if len(probe) else 0.0
         if log is not None:
             log.add(**(context or {}), stage="calibration", iteration=it,
-                    residual_percent=res.std_percent, step=max(rot, tra), n_points=int(res.mask.sum()))
-        logger.debug("calibration it %d: residual %.4f%%, |drot| %.2e rad, |dt| %.2e mm",
-                     it, res.std_percent, rot, tra)
-        if rot < tol_rad and tra < tol_mm:
+                    residual_percent=res.std_percent, step=max(rot, tra), shift_px=shift,
+                    n_points=int(res.mask.sum()))
+        logger.debug("calibration it %d: residual %.4f%%, |drot| %.2e rad, |dt| %.2e mm, "
+                     "points moved %.2e px", it, res.std_percent, rot, tra, shift)
+        if (rot < tol_rad and tra < tol_mm) or (tol_px is not None and shift < tol_px):
             converged = True
             break
     res = gray_level_residual(X, quad, images, cams, normalisation, None, extra_mask)

@@ -74,7 +74,11 @@ class MeasurementSettings:
 
 @dataclass(frozen=True)
 class Measurement:
-    """Result of a shape measurement (world coordinates of the final cameras, mm)."""
+    """Result of a shape measurement (world coordinates of the final cameras, mm).
+
+    ``converged``: at the finest scale, the last shape Gauss-Newton stagnated and, when
+    calibrating, so did the fixed point (coarse scales only start the next one, Remark 3).
+    """
 
     q: np.ndarray
     nodes: np.ndarray
@@ -138,8 +142,12 @@ def _report_coverage(quad: PixelQuadrature, res: GrayLevelResidual, scale: int) 
                        scale, empty.size, ", ".join(map(str, empty[:5])))
 
 
-def _projected_shift_px(cameras_a, cameras_b, X: np.ndarray) -> float:
-    return max(float(np.max(np.linalg.norm(a.project(X) - b.project(X), axis=1)))
+def _projected_shift_px(cameras_a, X_a: np.ndarray, cameras_b, X_b: np.ndarray) -> float:
+    """Largest move (px) of the nodes' images between two states (cameras, node positions).
+
+    Gauge invariant: a rigid motion handed from q to the poses moves neither image.
+    """
+    return max(float(np.max(np.linalg.norm(a.project(X_a) - b.project(X_b), axis=1)))
                for a, b in zip(cameras_a, cameras_b))
 
 
@@ -175,7 +183,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
     log = GaussNewtonLog()
     t0 = time.perf_counter()
-    total_iterations, converged_all = 0, True
+    total_iterations = 0
     result = None
     bar = tqdm(settings.scales, desc="scales", disable=not settings.progress, leave=False)
     for scale in bar:
@@ -189,7 +197,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         _report_coverage(quad, gray_level_residual(quad.points(nodes_now), quad, imgs, scaled,
                                                    settings.normalisation, None, mask), scale)
         coarse = 2.0 ** scale
-        previous_residual = np.inf
+        previous_residual, converged_now = np.inf, True
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -216,14 +224,15 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                     f"shape Gauss-Newton diverged at scale {scale} (fixed point {fp}): the residual "
                     f"grew for several iterations; best residual {shape.residual.std_percent:.3f}% kept",
                     best=best)
-            converged_all &= shape.converged
+            converged_now = shape.converged
             if not settings.calibrate:
                 break
             q, cams = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
             scaled = [c.scaled(scale) for c in cams]
             X_nodes = current_nodes(mesh.nodes, normals, q)
             dq = float(np.max(np.abs(q - q_before)))
-            dp = _projected_shift_px([c.scaled(scale) for c in cams_before], scaled, X_nodes)
+            dp = _projected_shift_px([c.scaled(scale) for c in cams_before],
+                                     current_nodes(mesh.nodes, normals, q_before), scaled, X_nodes)
             logger.info("scale %d fixed point %d: residual %.3f%%, max|dq| %.2e mm, pose shift %.2e px",
                         scale, fp, shape.residual.std_percent, dq, dp)
             residual = shape.residual.std_percent
@@ -233,11 +242,13 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                 break
         else:
             if settings.calibrate:
-                converged_all = False
-                logger.warning("fixed point did not stagnate at scale %d within %d iterations",
-                               scale, settings.max_fixed_point)
+                converged_now = False
+                # a coarse scale only starts the next one (Remark 3): said, not warned
+                logger.log(logging.WARNING if scale == settings.scales[-1] else logging.INFO,
+                           "fixed point did not stagnate at scale %d within %d iterations",
+                           scale, settings.max_fixed_point)
         bar.set_postfix(residual=f"{result[0].std_percent:.2f}%")
-    return _build(mesh, normals, q, cams, result, log, total_iterations, t0, converged_all)
+    return _build(mesh, normals, q, cams, result, log, total_iterations, t0, converged_now)
 
 
 def _build(mesh, normals, q, cams, result, log, iterations, t0, converged) -> Measurement:
