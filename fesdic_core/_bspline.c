@@ -17,6 +17,7 @@
 static inline double fold(double x, Py_ssize_t n, double *sign)
 {
     if (n == 1) { *sign = 0.0; return 0.0; }
+    if (x >= 0.0 && x <= (double)(n - 1)) { *sign = 1.0; return x; }   /* inside: no fold */
     const double period = 2.0 * (double)(n - 1);
     double xm = fmod(x, period);
     if (xm < 0.0) xm += period;

@@ -141,28 +141,41 @@ class Camera:
 
     def _project(self, X: np.ndarray, linearise: bool) -> tuple[np.ndarray, "Linearisation | None"]:
         X = _points(X)
-        R = self.R
-        z = X @ R[2] + self.tvec[2]                                # camera frame, one axis a pass
-        inv_z = 1.0 / z
-        xn = (X @ R[0] + self.tvec[0]) * inv_z
-        yn = (X @ R[1] + self.tvec[1]) * inv_z
+        R, t = self.R, self.tvec
+        inv_z = X @ R[2]                                          # camera frame, one axis a pass
+        inv_z += t[2]
+        np.reciprocal(inv_z, out=inv_z)
+        xn = X @ R[0]
+        xn += t[0]
+        xn *= inv_z                                               # x' = x_cam / z_cam
+        yn = X @ R[1]
+        yn += t[1]
+        yn *= inv_z
         k1, k2, p1, p2, k3 = self.dist
         fx, skew, cx, fy, cy = self.K[0, 0], self.K[0, 1], self.K[0, 2], self.K[1, 1], self.K[1, 2]
+        uv = np.empty((len(X), 2))
         if not self.dist.any():                                   # pinhole: D = identity
-            uv = np.column_stack([fx * xn + skew * yn + cx, fy * yn + cy])
+            uv[:, 0] = fx * xn + skew * yn + cx
+            uv[:, 1] = fy * yn + cy
             return uv, (Linearisation(self, X, R, inv_z, xn, yn, None) if linearise else None)
-        xy = xn * yn
-        r2 = xn * xn + yn * yn
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = xn * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xn * xn)
-        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xy
-        uv = np.column_stack([fx * xd + skew * yd + cx, fy * yd + cy])
+        xx, yy, xy = xn * xn, yn * yn, xn * yn
+        r2 = xx + yy
+        radial = k3 * r2                                          # 1 + k1 r2 + k2 r2^2 + k3 r2^3
+        radial += k2
+        radial *= r2
+        radial += k1
+        radial *= r2
+        radial += 1.0
+        xd = xn * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xx)
+        yd = yn * radial + p1 * (r2 + 2.0 * yy) + 2.0 * p2 * xy
+        uv[:, 0] = fx * xd + skew * yd + cx
+        uv[:, 1] = fy * yd + cy
         if not linearise:
             return uv, None
         drad = 2.0 * (k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2))     # d radial / d r2, times 2
-        D = (radial + drad * xn * xn + 2.0 * p1 * yn + 6.0 * p2 * xn,       # d(x'', y'')/d(x', y')
+        D = (radial + drad * xx + 2.0 * p1 * yn + 6.0 * p2 * xn,           # d(x'', y'')/d(x', y')
              drad * xy + 2.0 * p1 * xn + 2.0 * p2 * yn,                     # (symmetric)
-             radial + drad * yn * yn + 6.0 * p1 * yn + 2.0 * p2 * xn)
+             radial + drad * yy + 6.0 * p1 * yn + 2.0 * p2 * xn)
         return uv, Linearisation(self, X, R, inv_z, xn, yn, D)
 
     def project(self, X: np.ndarray) -> np.ndarray:

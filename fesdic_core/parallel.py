@@ -14,7 +14,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
-__all__ = ["THREADS", "for_each_block"]
+__all__ = ["THREADS", "for_each_block", "for_each_span"]
 
 THREADS = max(1, int(os.environ.get("FESDIC_THREADS", min(os.cpu_count() or 1, 8))))
 
@@ -30,16 +30,21 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL
 
 
-def for_each_block(work: Callable[[slice], None], n: int, block: int) -> None:
-    """Call ``work(span)`` for consecutive spans of ``block`` items covering ``range(n)``.
+def for_each_span(work: Callable[[int], None], n_spans: int) -> None:
+    """Call ``work(k)`` for ``k`` in ``range(n_spans)``, on the core's threads.
 
-    Blocks run on the core's threads; a call from one of those threads (nested blocks)
-    runs its blocks in line, so the pool never waits on itself.
+    A call from one of those threads (nested blocks) runs in line, so the pool never waits
+    on itself; an exception of a block is raised here.
     """
-    spans = [slice(a, min(a + block, n)) for a in range(0, n, block)]
-    if THREADS == 1 or len(spans) < 2 or threading.current_thread().name.startswith("fesdic"):
-        for span in spans:
-            work(span)
+    if THREADS == 1 or n_spans < 2 or threading.current_thread().name.startswith("fesdic"):
+        for k in range(n_spans):
+            work(k)
         return
-    for _ in _pool().map(work, spans):                         # re-raises a block's exception
+    for _ in _pool().map(work, range(n_spans)):
         pass
+
+
+def for_each_block(work: Callable[[slice], None], n: int, block: int) -> None:
+    """Call ``work(span)`` for consecutive spans of ``block`` items covering ``range(n)``."""
+    spans = [slice(a, min(a + block, n)) for a in range(0, n, block)]
+    for_each_span(lambda k: work(spans[k]), len(spans))

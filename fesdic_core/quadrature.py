@@ -118,6 +118,28 @@ class PixelQuadrature:
         return np.concatenate(starts), np.concatenate([g.elements for g in self.groups])
 
     @cached_property
+    def _blocks(self) -> dict:
+        return {}
+
+    def element_blocks(self, size: int) -> tuple[tuple[slice, slice], ...]:
+        """Blocks of about ``size`` points made of whole elements: (points, runs) slices.
+
+        ``runs`` indexes the element runs (:attr:`_element_runs`): the elements whose points
+        are exactly the block's, so per-element sums can be taken block by block.
+        """
+        if size not in self._blocks:
+            self._blocks[size] = self._cut_blocks(size)
+        return self._blocks[size]
+
+    def _cut_blocks(self, size: int) -> tuple[tuple[slice, slice], ...]:
+        starts, _ = self._element_runs
+        cuts = np.unique(np.searchsorted(starts, np.arange(0, self.n_points, size)))
+        edges = np.append(cuts, len(starts))
+        bounds = np.append(starts, self.n_points)
+        return tuple((slice(int(bounds[a]), int(bounds[b])), slice(int(a), int(b)))
+                     for a, b in zip(edges[:-1], edges[1:]) if b > a)
+
+    @cached_property
     def L(self) -> sps.csr_matrix:
         """The shape functions of every point, csr (g, n_nodes) (``L^T`` of Eq. 4)."""
         rows, cols, vals = [], [], []

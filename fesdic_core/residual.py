@@ -13,7 +13,7 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from .parallel import for_each_block
+from .parallel import for_each_span
 from .quadrature import PixelQuadrature
 
 logger = logging.getLogger(__name__)
@@ -36,6 +36,7 @@ class GrayLevelResidual:
     dr_dp : (g, 12) ``dr/dp`` for the extrinsics ``[p0, p1]`` of the two cameras, or None
     sigma0 : (g,) gray-level scale of image 0 at the point (to turn r into gray levels)
     dynamic_range : float, dynamic range of image 0 (gray levels)
+    std_percent : standard deviation of :attr:`percent` over the mask (Fig. 11; NaN if empty)
     """
 
     r: np.ndarray
@@ -44,6 +45,7 @@ class GrayLevelResidual:
     dr_dp: np.ndarray | None
     sigma0: np.ndarray
     dynamic_range: float
+    std_percent: float
 
     @property
     def percent(self) -> np.ndarray:
@@ -53,35 +55,16 @@ class GrayLevelResidual:
         return out
 
     @property
-    def std_percent(self) -> float:
-        """Standard deviation of the residual field in percent of the dynamic range (Fig. 11)."""
-        p = self.percent[self.mask]
-        return float(np.std(p)) if p.size else float("nan")
-
-    @property
     def n_dropped(self) -> int:
         return int(np.count_nonzero(~self.mask))
 
 
-def _element_statistics(f: np.ndarray, mask: np.ndarray, quad: PixelQuadrature, mode: str,
-                        dynamic_range: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and scale of the gray levels ``f`` (g,) over each element (n_elements,) (Remark 2).
-
-    "global" puts the statistics of the whole region in every element, "none" is (0, 1).
-    """
-    if mode == "none":
-        return np.zeros(quad.n_elements), np.ones(quad.n_elements)
-    fm = np.where(mask, f, 0.0)
-    if mode == "global":
-        count = max(np.count_nonzero(mask), 1)
-        sums = np.array([[fm.sum()], [np.dot(fm, fm)]]) / count
-    else:
-        count = np.maximum(quad.element_sum(mask.astype(float)), 1.0)
-        sums = np.stack([quad.element_sum(fm), quad.element_sum(fm * fm)]) / count
-    mean, var = sums[0], sums[1] - sums[0] ** 2
-    sigma = np.maximum(np.sqrt(np.maximum(var, 0.0)), _SIGMA_FLOOR * dynamic_range)
-    return (np.broadcast_to(mean, quad.n_elements).copy(),
-            np.broadcast_to(sigma, quad.n_elements).copy())
+def _scale_of(moments: np.ndarray, dynamic_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and scale (floored) from the moments ``[count, sum f, sum f^2]`` (3, m)."""
+    count = np.maximum(moments[0], 1.0)
+    mean = moments[1] / count
+    var = np.maximum(moments[2] / count - mean ** 2, 0.0)
+    return mean, np.maximum(np.sqrt(var), _SIGMA_FLOOR * dynamic_range)
 
 
 def _project_and_sample(X: np.ndarray, images: Sequence, cameras: Sequence, jacobian: str | None,
@@ -98,7 +81,8 @@ def _project_and_sample(X: np.ndarray, images: Sequence, cameras: Sequence, jaco
             mask &= (lin.inv_z > 0.0) & image.inside(x)                 # inside() is False for NaN
         views.append((x, lin))
     for c, (image, (x, lin)) in enumerate(zip(images, views)):
-        value, grad = image.evaluate_with_gradient(np.where(mask[:, None], x, 0.0))
+        x[~mask] = 0.0                                                 # keep unseen points harmless
+        value, grad = image.evaluate_with_gradient(x)
         f[c] = value
         if jacobian == "point":
             pull[c] = lin.pull_point(grad)                             # J_c^T grad f_c
@@ -121,9 +105,9 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
         or None
     extra_mask : (g,) bool, optional, points to ignore (e.g. faces hidden from a camera)
 
-    Two passes over cache-sized blocks of points shared out over threads (numpy and the
-    interpolation kernel release the GIL): sampling, then, with the statistics of each
-    element, the normalised residual and its derivative.
+    Two passes over cache-sized blocks of whole elements, shared out over threads (numpy
+    and the interpolation kernel release the GIL): sampling and the gray-level moments of
+    each element, then the normalised residual, its derivative and its moments.
     """
     if normalisation not in NORMALISATIONS:
         raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {normalisation!r}")
@@ -138,24 +122,63 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
         pull = np.empty((g, 2, k)).transpose(1, 0, 2)
     else:                                             # dr_dX = pull[0], contiguous
         pull = np.empty((2, g, k))
-    for_each_block(lambda b: _project_and_sample(X[b], images, cameras, jacobian, mask[b],
-                                                 f[:, b], pull[:, b]), g, _BLOCK)
-    dyn = float(images[0].dynamic_range)
-    (mean0, sigma0), (mean1, sigma1) = (_element_statistics(fc, mask, quad, normalisation, dyn)
-                                        for fc in f)
-    r, s0 = np.empty(g), np.empty(g)
+    blocks = quad.element_blocks(_BLOCK)
+    run_starts, run_element = quad._element_runs
+    moments = np.zeros((2, 3, len(run_starts)))       # per camera, per element run: n, sum, sum^2
 
-    def normalise(b: slice) -> None:                                   # Remark 2, then Eq. 3
+    def sample(i: int) -> None:
+        b, runs = blocks[i]
+        _project_and_sample(X[b], images, cameras, jacobian, mask[b], f[:, b], pull[:, b])
+        seen = mask[b].astype(float)
+        starts = run_starts[runs] - b.start
+        for c in range(2):
+            fm = f[c, b] * seen
+            moments[c, :, runs] = [np.add.reduceat(seen, starts), np.add.reduceat(fm, starts),
+                                   np.add.reduceat(fm * fm, starts)]
+
+    for_each_span(sample, len(blocks))
+    dyn = float(images[0].dynamic_range)
+    n_elements = quad.n_elements
+    stats = []                                        # mean and sigma per element (Remark 2)
+    for c in range(2):
+        if normalisation == "none":
+            mean, sigma = np.zeros(n_elements), np.ones(n_elements)
+        else:
+            m = moments[c].sum(axis=1, keepdims=True) if normalisation == "global" else moments[c]
+            mean_r, sigma_r = _scale_of(m, dyn)
+            mean, sigma = np.empty(n_elements), np.empty(n_elements)
+            mean[run_element], sigma[run_element] = mean_r, sigma_r
+        stats.append((mean, sigma))
+    (mean0, sigma0), (mean1, sigma1) = stats
+    r, s0 = np.empty(g), np.empty(g)
+    residual_moments = np.zeros((len(blocks), 3))     # n, mean, M2 of r * sigma0 per block
+
+    def normalise(i: int) -> None:                                      # Remark 2, then Eq. 3
+        b = blocks[i][0]
         e, seen = quad.element[b], mask[b]
         s0[b], s1 = sigma0[e], sigma1[e]
         r[b] = np.where(seen, (f[0, b] - mean0[e]) / s0[b] - (f[1, b] - mean1[e]) / s1, 0.0)
         pull[0, b] *= np.where(seen, 1.0 / s0[b], 0.0)[:, None]
         pull[1, b] *= np.where(seen, -1.0 / s1, 0.0)[:, None]
         if jacobian == "point":
-            pull[0, b] += pull[1, b]                                   # J0^T df0 - J1^T df1
+            pull[0, b] += pull[1, b]                                    # J0^T df0 - J1^T df1
+        gray = (r[b] * s0[b])[seen]
+        if gray.size:
+            residual_moments[i] = gray.size, gray.mean(), np.sum((gray - gray.mean()) ** 2)
 
-    for_each_block(normalise, g, _BLOCK)
+    for_each_span(normalise, len(blocks))
     return GrayLevelResidual(r=r, mask=mask, dr_dX=pull[0] if jacobian == "point" else None,
                              dr_dp=pull.transpose(1, 0, 2).reshape(g, 2 * k)
                              if jacobian == "extrinsic" else None,
-                             sigma0=s0, dynamic_range=dyn)
+                             sigma0=s0, dynamic_range=dyn,
+                             std_percent=100.0 * _pooled_std(residual_moments) / dyn)
+
+
+def _pooled_std(moments: np.ndarray) -> float:
+    """Standard deviation of the union of groups given by (count, mean, M2) rows (Chan et al.)."""
+    n = moments[:, 0].sum()
+    if n == 0:
+        return float("nan")
+    mean = np.dot(moments[:, 0], moments[:, 1]) / n
+    m2 = moments[:, 2].sum() + np.dot(moments[:, 0], (moments[:, 1] - mean) ** 2)
+    return float(np.sqrt(m2 / n))
