@@ -36,7 +36,8 @@ FIGURE_CAPTIONS = {
     "shape_errors": "Shape error against the truth and distance to the best-fit plane per method.",
 }
 
-_CSS = """
+#: the reports' style sheet (also used by the examples' reports)
+STYLESHEET = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1200px; color: #222; }
 table { border-collapse: collapse; margin: 1em 0; }
 th, td { border: 1px solid #bbb; padding: 0.3em 0.7em; text-align: right; }
@@ -177,5 +178,5 @@ def report_html(run, figures: dict[str, bytes]) -> str:
         "<h2>Figures</h2>", *(_figure_html(n, png) for n, png in figures.items()),
     ]
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-            "<title>georeg report</title>\n<style>" + _CSS + "</style>\n</head>\n<body>\n"
+            "<title>georeg report</title>\n<style>" + STYLESHEET + "</style>\n</head>\n<body>\n"
             + "\n".join(body) + "\n</body>\n</html>\n")

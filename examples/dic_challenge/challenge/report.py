@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from georeg_app.report import STYLESHEET
+
 from .pipeline import FACES, ChallengeRun, Comparison
 
 LASER = {"block_height_mm": 6.36, "radius_mm": {"cylinder_v": 6.38, "cylinder_h": 6.62},
@@ -24,16 +26,7 @@ PYVALE = {"base_plane_um": 7.9, "base_quadric_um": 3.6, "block_top_um": "4.2-4.4
 TARGETS = {"base_quadric_um": 3.6, "block_height_mm": (6.36, 0.03), "flat_vs_cylinder_um": 10.0,
            "time_s": 300.0}
 
-_CSS = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1250px; color: #222; }
-table { border-collapse: collapse; margin: 1em 0; }
-th, td { border: 1px solid #bbb; padding: 0.3em 0.6em; text-align: right; }
-th { background: #eee; } td:first-child, th:first-child { text-align: left; }
-.PASS { color: #fff; background: #2a7d2a; padding: 0 0.4em; font-weight: bold; }
-.FAIL { color: #fff; background: #b22; padding: 0 0.4em; font-weight: bold; }
-.NOT-CHECKED { color: #fff; background: #777; padding: 0 0.4em; font-weight: bold; }
-img { max-width: 100%; } figcaption { color: #555; } code { background: #f4f4f4; }
-"""
+_CSS = STYLESHEET + "code { background: #f4f4f4; }\n"
 
 
 def _f(value, digits: int = 3, scale: float = 1.0) -> str:
