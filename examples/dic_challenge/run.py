@@ -103,10 +103,16 @@ def main(argv=None) -> int:
         return 1
     command = "python " + " ".join(shlex.quote(a) for a in [str(Path(sys.argv[0])), *(argv or sys.argv[1:])])
     t0 = time.perf_counter()
-    run = run_challenge(HERE, faces, scales=args.scales, crop=args.crop,
-                        progress=not args.quiet)
-    comparison = compare(run)
-    written = write_outputs(Path(args.out), run, comparison, command)
+    try:
+        run = run_challenge(HERE, faces, scales=args.scales, crop=args.crop,
+                            progress=not args.quiet)
+        comparison = compare(run)
+        written = write_outputs(Path(args.out), run, comparison, command)
+    except (ValueError, OSError, RuntimeError) as err:        # bad input: one line, exit 1
+        if args.verbose:
+            raise
+        print(f"run.py: error: {' '.join(str(err).split())}", file=sys.stderr)
+        return 1
     for name, ok, detail in report.targets(run, comparison):
         print(f"{'NOT CHECKED' if ok is None else ('PASS' if ok else 'FAIL'):>11}  {name}: {detail}")
     print(f"wrote {len(written)} files to {args.out} in {time.perf_counter() - t0:.1f} s "

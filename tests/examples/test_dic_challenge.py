@@ -134,3 +134,14 @@ def test_config_errors_name_the_file_and_key(tmp_path):
     bad.write_text(text.replace('kind = "quadrilateral"', 'kind = "sphere"'))
     with pytest.raises(ConfigError, match="kind: expected one of quadrilateral, cylinder"):
         load_face(bad)
+
+
+def test_command_line_errors_exit_1_in_one_line_and_write_nothing(tmp_path, capsys):
+    import runpy
+    main = runpy.run_path(str(HERE / "run.py"), run_name="not_main")["main"]
+    for argv, words in ((["--faces", "block_top"], "'base' is needed"),
+                        (["--faces", "base,wing"], "unknown face(s) wing")):
+        assert main(["--out", str(tmp_path / "out"), "--quiet", *argv]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("run.py: error: ") and words in err[0], err
+        assert not (tmp_path / "out").exists()
