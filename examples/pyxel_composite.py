@@ -29,6 +29,7 @@ import contextlib
 import io
 import logging
 import pathlib
+import sys
 import time
 
 import numpy as np
@@ -204,8 +205,12 @@ def main(argv=None) -> dict:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
-    scales = tuple(int(s) for s in args.scales.split(","))
-    elements = tuple(int(s) for s in args.elements.split(","))
+    try:
+        scales = tuple(int(s) for s in args.scales.split(","))
+        elements = tuple(int(s) for s in args.elements.split(","))
+    except ValueError:
+        parser.error(f"--scales and --elements take integers separated by commas, got "
+                     f"{args.scales!r}, {args.elements!r}")
     if len(scales) != args.levels or len(elements) != 2:
         parser.error(f"--scales needs one scale per level ({args.levels}), "
                      f"--elements two numbers; got {args.scales!r}, {args.elements!r}")
@@ -269,4 +274,7 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (OSError, ValueError) as err:                # e.g. a missing data file: one line
+        sys.exit(f"pyxel_composite.py: error: {err}")
