@@ -66,7 +66,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
-                         residual_rtol: float = 1e-4, tol_px: float | None = None,
+                         residual_rtol: float = 1e-4,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
                          context: dict | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
@@ -76,13 +76,11 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     stereo : (R, t), optional
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
-    tol_px : optional, also stop when an update moves the projections of the points by
-        less than this (px of the images given): the pose no longer changes what is seen.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     residual_rtol : also stop when the residual changes by less than this fraction.
     """
     cams = list(cameras)
-    probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # measures a step in px
+    probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # logs each step in px
     converged, it, previous = False, 0, np.inf
     for it in range(1, max_iter + 1):
         res = gray_level_residual(X, quad, images, cams, normalisation, "extrinsic", extra_mask)
@@ -111,7 +109,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                     n_points=int(res.mask.sum()))
         logger.debug("calibration it %d: residual %.4f%%, |drot| %.2e rad, |dt| %.2e mm, "
                      "points moved %.2e px", it, res.std_percent, rot, tra, shift)
-        if (rot < tol_rad and tra < tol_mm) or (tol_px is not None and shift < tol_px):
+        if rot < tol_rad and tra < tol_mm:
             converged = True
             break
     res = gray_level_residual(X, quad, images, cams, normalisation, None, extra_mask)

@@ -134,7 +134,7 @@ def _report_coverage(quad: PixelQuadrature, res: GrayLevelResidual, scale: int) 
     if res.n_dropped:
         logger.info("scale %d: %d of %d integration points fall outside an image (or are masked)"
                     " and are dropped", scale, res.n_dropped, quad.n_points)
-    seen = np.bincount(quad.element, weights=res.mask.astype(float), minlength=quad.n_elements)
+    seen = quad.element_sum(res.mask.astype(float))
     empty = np.flatnonzero(seen == 0)
     if empty.size:
         logger.warning("scale %d: %d element(s) lost all their integration points (first: %s); "
@@ -193,8 +193,9 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
         node_weights = quad.to_nodes(quad.weight_mm2)
         slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
-        mask = None if visibility is None else visibility(quad.points(nodes_now), scaled)
-        _report_coverage(quad, gray_level_residual(quad.points(nodes_now), quad, imgs, scaled,
+        X_now = quad.points(nodes_now)
+        mask = None if visibility is None else visibility(X_now, scaled)
+        _report_coverage(quad, gray_level_residual(X_now, quad, imgs, scaled,
                                                    settings.normalisation, None, mask), scale)
         coarse = 2.0 ** scale
         previous_residual, converged_now = np.inf, True

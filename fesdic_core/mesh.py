@@ -14,6 +14,7 @@ import dataclasses
 import logging
 
 import numpy as np
+import scipy.sparse as sps
 
 from fesdic_core.elements import FAMILIES, ElementFamily, centroid, gauss_rule
 
@@ -32,6 +33,7 @@ __all__ = [
     "rectangle_mesh",
     "edges",
     "boundary_nodes",
+    "assemble",
 ]
 
 #: relative area element below which an element is called degenerate
@@ -336,3 +338,19 @@ def boundary_nodes(mesh: SurfaceMesh) -> np.ndarray:
     sizes = np.cumsum([len(e) for e in edge_nodes])[:-1]
     found = [e[flags].ravel() for e, flags in zip(edge_nodes, np.split(on_boundary, sizes))]
     return np.unique(np.concatenate(found))
+
+
+def assemble(connectivities, element_matrices, n_nodes: int) -> sps.csr_matrix:
+    """Global sparse matrix (n, n) from element matrices: the finite-element scatter-add.
+
+    ``connectivities`` and ``element_matrices`` are matching lists of (ne, nn) node indices
+    and (ne, nn, nn) matrices (one pair per block or group); duplicates are summed.
+    """
+    rows, cols, values = [], [], []
+    for conn, Ke in zip(connectivities, element_matrices):
+        nn = conn.shape[1]
+        rows.append(np.repeat(conn, nn, axis=1).ravel())
+        cols.append(np.tile(conn, (1, nn)).ravel())
+        values.append(np.asarray(Ke).ravel())
+    return sps.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(n_nodes, n_nodes))

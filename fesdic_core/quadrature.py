@@ -107,13 +107,14 @@ class PixelQuadrature:
     def element_sum(self, values: np.ndarray) -> np.ndarray:
         """(n_elements,) sums of point values ``values`` (g,) over each element."""
         out = np.zeros(self.n_elements)
-        starts, order = self._element_runs
+        starts, order = self.element_runs
         out[order] = np.add.reduceat(values, starts)        # each element's points are a run
         return out
 
     @cached_property
-    def _element_runs(self) -> tuple[np.ndarray, np.ndarray]:
-        """First point of each element's run of points, and the element of each run."""
+    def element_runs(self) -> tuple[np.ndarray, np.ndarray]:
+        """First point of each element's run of points (the points of an element are
+        contiguous), and the element of each run."""
         starts = [g.start + g.points_per_element * np.arange(len(g.elements)) for g in self.groups]
         return np.concatenate(starts), np.concatenate([g.elements for g in self.groups])
 
@@ -124,7 +125,7 @@ class PixelQuadrature:
     def element_blocks(self, size: int) -> tuple[tuple[slice, slice], ...]:
         """Blocks of about ``size`` points made of whole elements: (points, runs) slices.
 
-        ``runs`` indexes the element runs (:attr:`_element_runs`): the elements whose points
+        ``runs`` indexes the element runs (:attr:`element_runs`): the elements whose points
         are exactly the block's, so per-element sums can be taken block by block.
         """
         if size not in self._blocks:
@@ -132,7 +133,7 @@ class PixelQuadrature:
         return self._blocks[size]
 
     def _cut_blocks(self, size: int) -> tuple[tuple[slice, slice], ...]:
-        starts, _ = self._element_runs
+        starts, _ = self.element_runs
         cuts = np.unique(np.searchsorted(starts, np.arange(0, self.n_points, size)))
         edges = np.append(cuts, len(starts))
         bounds = np.append(starts, self.n_points)

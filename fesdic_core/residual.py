@@ -123,7 +123,7 @@ def gray_level_residual(X: np.ndarray, quad: PixelQuadrature, images: Sequence, 
     else:                                             # dr_dX = pull[0], contiguous
         pull = np.empty((2, g, k))
     blocks = quad.element_blocks(_BLOCK)
-    run_starts, run_element = quad._element_runs
+    run_starts, run_element = quad.element_runs
     moments = np.zeros((2, 3, len(run_starts)))       # per camera, per element run: n, sum, sum^2
 
     def sample(i: int) -> None:

@@ -19,9 +19,10 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sps
 
+from .mesh import assemble
+from .parallel import for_each_block
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
-from .parallel import for_each_block
 from .solvers import StepSolver
 
 logger = logging.getLogger(__name__)
@@ -52,7 +53,7 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
     """
     w = np.where(res.mask, quad.weight_mm2, 0.0)
     n = normals.shape[0]
-    rows, cols, values, b = [], [], [], np.zeros(n)
+    element_matrices, b = [], np.zeros(n)
     for group in quad.groups:
         E, (m, nn) = len(group.elements), group.N.shape
         He, be = np.empty((E, nn, nn)), np.empty((E, nn))
@@ -67,14 +68,9 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
             be[span] = -(res.r[points].reshape(-1, 1, m) @ wphi)[:, 0]  # Eq. 8
 
         for_each_block(element_block, E, max(1, _ELEMENT_BLOCK // m))
-        conn = group.connectivity
-        rows.append(np.repeat(conn, nn, axis=1).ravel())
-        cols.append(np.tile(conn, (1, nn)).ravel())
-        values.append(He.ravel())
-        b += np.bincount(conn.ravel(), weights=be.ravel(), minlength=n)
-    H = sps.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(n, n))                                   # duplicates summed
-    return H, b
+        element_matrices.append(He)
+        b += np.bincount(group.connectivity.ravel(), weights=be.ravel(), minlength=n)
+    return assemble([g.connectivity for g in quad.groups], element_matrices, n), b
 
 
 @dataclass

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from .elements import gauss_rule
-from .mesh import SurfaceMesh
+from .mesh import SurfaceMesh, assemble
 from .solvers import sparse_solve
 
 logger = logging.getLogger(__name__)
@@ -36,7 +36,7 @@ def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
     The surface gradient of a shape function is ``J (J^T J)^-1 dN/dxi`` with
     ``J = [dX/dxi, dX/deta]`` (3 x 2); then ``A_IJ = sum_g w_g grad_s N_I . grad_s N_J``.
     """
-    rows, cols, vals = [], [], []
+    element_matrices = []
     for block in mesh.blocks:
         xi, w = gauss_rule(block.family, 3)
         dN = block.family.shape_derivatives(xi)                    # (m, nn, 2)
@@ -48,15 +48,8 @@ def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
         grad = np.einsum("emda,emab,mib->emid", J, Ginv, dN)         # (ne, m, nn, 3)
         dA = np.sqrt(detG) * w                                        # area weights
-        Ke = np.einsum("em,emid,emjd->eij", dA, grad, grad)          # (ne, nn, nn)
-        conn = block.connectivity
-        rows.append(np.repeat(conn, conn.shape[1], axis=1).ravel())
-        cols.append(np.tile(conn, (1, conn.shape[1])).ravel())
-        vals.append(Ke.ravel())
-    n = mesh.nodes.shape[0]
-    A = sps.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(n, n)).tocsr()
-    return A
+        element_matrices.append(np.einsum("em,emid,emjd->eij", dA, grad, grad))  # (ne, nn, nn)
+    return assemble([b.connectivity for b in mesh.blocks], element_matrices, mesh.nodes.shape[0])
 
 
 def tikhonov_weight(H: sps.spmatrix, A: sps.spmatrix, nodes: np.ndarray, length_mm: float) -> float:

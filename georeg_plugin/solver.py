@@ -174,19 +174,18 @@ class GeometricRegularization:
         """
         s = self.level(scale)
         H_s, b_s = self.project(H, b, s)
-        hint = "no integration point sees spline dof {dof}"
-        if self.hold_unseen:
+        seen = np.ones(b_s.size, dtype=bool)
+        if self.hold_unseen:                                   # dofs no point sees keep their value
             diag = np.abs(H_s.diagonal())
             seen = diag > _ZERO_PIVOT * (diag.max() if diag.size else 0.0)
             if not seen.all():
                 logger.debug("level %d: %d of %d spline dofs unseen, held", s,
                              np.count_nonzero(~seen), seen.size)
-                d_s = np.zeros(seen.size)
-                if seen.any():
-                    d_s[seen] = _sparse_solve(H_s[seen][:, seen], b_s[seen], s,
-                                              "projected Hessian C_s H C_s^T", hint)
-                return self.operator(s).T @ d_s  # Eq. 21
-        d_s = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T", hint)
+                H_s, b_s = H_s[seen][:, seen], b_s[seen]
+        d_s = np.zeros(seen.size)
+        if b_s.size:
+            d_s[seen] = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T",
+                                      "no integration point sees spline dof {dof}")
         logger.debug("scale %d -> spline level %d: %d dofs", scale, s, d_s.size)
         return self._transposed[s] @ d_s  # Eq. 21
 
