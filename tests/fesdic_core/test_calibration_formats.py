@@ -400,6 +400,32 @@ def test_fuzz_dice_reader(tmp_path, name, text):
     _must_fail_cleanly(read_dice, path, "fuzz_cal.xml")
 
 
+@pytest.mark.parametrize("read", [read_opencv_stereo, read_vic3d, read_dice, read_cameras_json])
+@pytest.mark.parametrize("content", [b"", b"\x00\xff\xfe garbage \x89PNG", b"<not closed", b"[1, 2, 3]"])
+def test_every_reader_refuses_garbage_and_missing_files_by_name(tmp_path, read, content):
+    path = tmp_path / "garbage.dat"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=r"garbage\.dat"):
+        read(path)
+    with pytest.raises((ValueError, FileNotFoundError), match=r"absent\.dat"):
+        read(tmp_path / "absent.dat")
+
+
+_json_docs = st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=5),
+                          lambda kids: st.lists(kids, max_size=4) | st.dictionaries(
+                              st.sampled_from(["cameras", "K", "K1", "D1", "R", "T", "dist", "rvec"]), kids,
+                              max_size=4), max_leaves=12)
+
+
+@_FUZZ
+@given(doc=_json_docs)
+def test_fuzz_whole_documents(tmp_path, doc):
+    path = tmp_path / "fuzz_doc.json"
+    path.write_text(json.dumps(doc).replace("NaN", "nan").replace("Infinity", "inf"))
+    for read in (read_cameras_json, read_opencv_stereo):
+        _must_fail_cleanly(read, path, "fuzz_doc.json")
+
+
 def test_json_writer_and_opencv_writer_agree(tmp_path):
     """The two written rig files (JSON and OpenCV YAML) hold the same cameras."""
     cam0 = Camera(K0, D0, cv2.Rodrigues(R_W0)[0].ravel(), T_W0, SIZE, "cam0")
