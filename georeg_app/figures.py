@@ -18,6 +18,7 @@ import logging
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter
 
 from .maps import (FAILED_GREY, bfp_frame, cmap_colours, error_maps,  # noqa: F401 (re-exported)
                    nice_scale_factor, png, residual_maps, shape_maps)
@@ -46,6 +47,16 @@ def _unit(run) -> float:
     return unit if unit > 0 else 1.0
 
 
+def _log_residual_axis(ax) -> None:
+    """Log y axis of residuals (%) with plain numbers (2, 3, 10 rather than 2 x 10^0)."""
+    ax.set_yscale("log")
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain)
+    ax.set_ylabel("residual std (% of dynamic range)")
+    ax.grid(True, which="both", alpha=0.3)
+
+
 def _not_drawn_note(fig: Figure, run) -> None:
     """Name the failed methods that have no measurement to draw."""
     missing = [r.spec.label for r in run.results if r.measurement is None]
@@ -56,21 +67,21 @@ def _not_drawn_note(fig: Figure, run) -> None:
 
 def convergence(run) -> bytes:
     """Residual (%) against iterations and against time / one fine-scale iteration (Fig. 11);
-    failed methods dashed grey."""
+    one colour per method (by its rank in the run), failed methods dashed grey."""
     unit = _unit(run)
     fig = Figure(figsize=(11, 4.2))
     ax_it, ax_t = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    for result in measured(run.results):
+    for k, result in enumerate(run.results):
+        if result.measurement is None:
+            continue
         it, t, res = _history(result, unit)
-        style = dict(color=FAILED_GREY, ls="--") if is_failed(result) else {}
+        style = dict(color=FAILED_GREY, ls="--") if is_failed(result) else dict(color=f"C{k % 10}")
         ax_it.plot(it, res, marker=".", label=_label(result), **style)
         ax_t.plot(t, res, marker=".", label=_label(result), **style)
     for ax, xlabel in ((ax_it, "iteration (calibration and shape, all scales)"),
                        (ax_t, "time / one fine-scale iteration")):
-        ax.set_yscale("log")
+        _log_residual_axis(ax)
         ax.set_xlabel(xlabel)
-        ax.set_ylabel("residual std (% of dynamic range)")
-        ax.grid(True, which="both", alpha=0.3)
     ax_t.legend(fontsize=8)
     fig.suptitle("Convergence of the gray-level residual")
     _not_drawn_note(fig, run)
@@ -96,17 +107,16 @@ def multiscale_vs_monoscale(run) -> bytes | None:
     ax.axhline(mono_final, color="gray", ls="--", lw=1, label=f"monoscale final {mono_final:.3f}%")
     half = 0.5 * float(mono.measurement.time_s) / unit
     ax.axvline(half, color="gray", ls=":", lw=1, label="half the monoscale time")
-    ax.set_yscale("log")
+    _log_residual_axis(ax)
     ax.set_xlabel("time / one fine-scale iteration")
-    ax.set_ylabel("residual std (% of dynamic range)")
-    ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("georeg: multiscale vs monoscale (large markers: scale 0)")
     return png(fig)
 
 
 def _bars(ax, x: np.ndarray, values: list, run, colour: str) -> None:
-    """Bars of ``values`` (None: no bar); failed methods hatched grey and marked, best edged."""
+    """Bars of ``values`` with their value (None: no bar); failed methods hatched grey and
+    marked, the best method edged in black."""
     best, _ = best_method(run)
     for xi, value, result in zip(x, values, run.results):
         failed = is_failed(result)
@@ -117,8 +127,8 @@ def _bars(ax, x: np.ndarray, values: list, run, colour: str) -> None:
         ax.bar(xi, value, 0.6, color=FAILED_GREY if failed else colour,
                hatch="//" if failed else None, alpha=0.6 if failed else 1.0,
                edgecolor="k" if result is best else "none", linewidth=2)
-        if failed:
-            ax.text(xi, value, "failed", ha="center", va="bottom", fontsize=8, color=FAILED_GREY)
+        ax.text(xi, value, ("failed\n" if failed else "") + f"{value:.3g}", ha="center",
+                va="bottom", fontsize=8, color=FAILED_GREY if failed else "k")
 
 
 def shape_errors(run) -> bytes:
@@ -148,6 +158,8 @@ def shape_errors(run) -> bytes:
     for ax in axes:
         ax.set_xticks(x, labels, rotation=20, ha="right", fontsize=8)
         ax.grid(True, axis="y", alpha=0.3)
+        lo, hi = ax.get_ylim()                                   # room for the value labels
+        ax.set_ylim(lo, hi * (3.0 if ax.get_yscale() == "log" else 1.12))
     fig.suptitle("Shape per method (black edge: best method)")
     return png(fig)
 

@@ -20,12 +20,12 @@ import textwrap
 import matplotlib
 import numpy as np
 from matplotlib.collections import PolyCollection
-from matplotlib.colors import Normalize
+from matplotlib.colors import Normalize, SymLogNorm
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers the 3-D projection)
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from .run_view import colour_range, failure, is_failed, measured, node_errors_um
+from .run_view import colour_range, failure, is_failed, measured, node_errors_um, succeeded
 
 logger = logging.getLogger(__name__)
 
@@ -87,7 +87,8 @@ def title(ax, result, text: str) -> None:
 def _empty_panel(ax, result) -> None:
     """A failed method without measurement: its label and reason, nothing drawn."""
     ax.set_axis_off()
-    ax.text(0.5, 0.5, textwrap.fill(f"{result.spec.label}\nFAILED: {failure(result)}", 40),
+    text = f"{result.spec.label}\n" + textwrap.fill(f"FAILED: {failure(result)}", 40)
+    ax.text(0.5, 0.5, text,
             ha="center", va="center", fontsize=9, color=FAILED_GREY, transform=ax.transAxes)
 
 
@@ -97,9 +98,13 @@ def _reference_frame(results) -> tuple[np.ndarray, np.ndarray]:
     return bfp_frame(np.asarray(ranked[0].measurement.nodes, float))
 
 
-def _colour_bar(fig: Figure, cmap: str, norm: Normalize, label: str) -> None:
+def _colour_bar(fig: Figure, cmap: str, norm: Normalize, label: str,
+                ticks: list[float] | None = None) -> None:
+    """One colour bar for all the panels, with arrows (values beyond the scale saturate)."""
     mappable = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
-    fig.colorbar(mappable, ax=fig.axes, shrink=0.7, label=label, extend="both")
+    bar = fig.colorbar(mappable, ax=fig.axes, shrink=0.7, label=label, extend="both", ticks=ticks)
+    if ticks is not None:
+        bar.ax.set_yticklabels([f"{t:g}" for t in ticks])
 
 
 def shape_maps(run, scale_factor: float | None = None, cmap: str = "RdBu_r") -> bytes | None:
@@ -205,18 +210,28 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
     return png(fig)
 
 
+def error_norm(results) -> SymLogNorm:
+    """Colour scale of the error maps (um): symmetric, up to :func:`colour_range` of the
+    successful methods, logarithmic beyond the smallest RMS error of a successful method
+    (errors of the methods often span decades: the best one stays visible)."""
+    vmax = colour_range(results, node_errors_um)
+    rms = [float(np.sqrt(np.mean(e ** 2))) for e in map(node_errors_um, succeeded(results))
+           if e is not None and e.size]
+    linthresh = min([vmax, *(v for v in rms if v > 0)])
+    return SymLogNorm(max(linthresh, 1e-3 * vmax), vmin=-vmax, vmax=vmax, base=10)
+
+
 def error_maps(run, cmap: str = "RdBu_r") -> bytes | None:
     """Signed error against the truth per node (um) over the best-fit plane, one panel per
-    method, one colour scale set by the successful methods. None when the truth is unknown
-    or no method carries per-node errors (``shape_error_mm``)."""
+    method, one colour scale set by the successful methods (:func:`error_norm`). None when
+    the truth is unknown or no method carries per-node errors (``shape_error_mm``)."""
     results = run.results
     with_errors = [r for r in measured(results) if node_errors_um(r) is not None]
     if not run.truth_available or not with_errors:
         if run.truth_available:
             logger.debug("truth known but no per-node error (shape_error_mm): no error maps")
         return None
-    vmax = colour_range(results, node_errors_um)
-    norm = Normalize(-vmax, vmax)
+    norm = error_norm(results)
     centre, axes = _reference_frame(results)
     first = (np.asarray(with_errors[0].measurement.nodes, float) - centre) @ axes.T
     span = np.maximum(np.ptp(first[:, :2], axis=0), 1e-9)
@@ -244,6 +259,8 @@ def error_maps(run, cmap: str = "RdBu_r") -> bytes | None:
         ax.set_aspect("equal")
         ax.set_xlabel("mm")
         title(ax, result, f"RMS error {np.sqrt(np.mean(errors ** 2)):.3g} µm")
-    fig.suptitle("Shape error against the truth (µm, after best rigid alignment)")
-    _colour_bar(fig, cmap, norm, "error (µm)")
+    fig.suptitle(f"Shape error against the truth (µm, after best rigid alignment; "
+                 f"logarithmic beyond ±{norm.linthresh:.3g} µm)")
+    decades = 10.0 ** np.arange(np.ceil(np.log10(norm.linthresh)), np.log10(norm.vmax) + 1e-9)
+    _colour_bar(fig, cmap, norm, "error (µm)", ticks=[*(-decades[::-1]), 0.0, *decades])
     return png(fig)

@@ -57,10 +57,12 @@ th { background: #eee; } td:first-child, th:first-child { text-align: left; }
 .PASS { color: #fff; background: #2a7d2a; padding: 0 0.4em; font-weight: bold; }
 .FAIL { color: #fff; background: #b22; padding: 0 0.4em; font-weight: bold; }
 .NOT-CHECKED { color: #fff; background: #777; padding: 0 0.4em; font-weight: bold; }
+td.status { text-align: left; }
 tr.failed td { color: #888; background: #f3f3f3; }
-tr.failed td.status { color: #b22; text-align: left; }
+tr.failed td.status { color: #b22; }
 tr.best td { background: #e3f4e3; font-weight: bold; }
-table.inputs td, table.rig td { font-family: monospace; font-size: 0.85em; }
+table.inputs td, table.rig td { font-family: monospace; font-size: 0.85em; text-align: left; }
+table.inputs th, table.rig th { text-align: left; }
 pre { background: #f6f6f6; padding: 0.7em; overflow-x: auto; }
 figure { margin: 1.5em 0; } img { max-width: 100%; } figcaption { color: #555; }
 """
