@@ -22,8 +22,7 @@ from matplotlib.ticker import FuncFormatter
 
 from .maps import (FAILED_GREY, bfp_frame, cmap_colours, error_maps,  # noqa: F401 (re-exported)
                    nice_scale_factor, png, residual_maps, shape_maps)
-from .run_view import (best_method, georeg_pair, is_failed, measured,  # noqa: F401
-                       rms_error_um, succeeded)
+from .run_view import best_method, georeg_pair, is_failed, rms_error_um, succeeded
 
 logger = logging.getLogger(__name__)
 

@@ -170,12 +170,14 @@ def _rms(values) -> float | None:
 
 def methods_table_html(run) -> str:
     """HTML table of the methods: status (failed: reason), RMS error vs truth (um), RMS
-    distance to BFP (mm), residual and noise level (%), iterations, time, convergence.
-    Failed rows have class "failed", the best method's row class "best"."""
+    distance to BFP (mm), residual and noise level (%; the column only when the run gives
+    ``noise_percent``), iterations, time, convergence. Failed rows have class "failed",
+    the best method's row class "best"."""
+    noise = any(getattr(r.measurement, "noise_percent", None) is not None for r in run.results)
     head = ("<tr><th>method</th><th>name</th><th>param</th><th>status</th>"
             "<th>RMS shape error vs truth (µm)</th><th>RMS distance to BFP (mm)</th>"
-            "<th>residual (% dyn.)</th><th>noise level (% dyn.)</th><th>iterations</th>"
-            "<th>time (s)</th><th>converged</th></tr>")
+            "<th>residual (% dyn.)</th>" + ("<th>noise level (% dyn.)</th>" if noise else "")
+            + "<th>iterations</th><th>time (s)</th><th>converged</th></tr>")
     best, _ = best_method(run)
     rows = []
     for r in run.results:
@@ -184,9 +186,9 @@ def methods_table_html(run) -> str:
         cells = [r.spec.label, r.spec.name, "" if r.spec.param is None else f"{r.spec.param:g}",
                  status, _f(rms_error_um(r)), _f(_rms(r.distance_to_bfp_mm))]
         if m is None:
-            cells += ["n/a"] * 5
+            cells += ["n/a"] * (5 if noise else 4)
         else:
-            cells += [_f(m.residual_percent), _f(getattr(m, "noise_percent", None)),
+            cells += [_f(m.residual_percent), *([_f(getattr(m, "noise_percent", None))] * noise),
                       str(int(m.iterations)), _f(m.time_s, 3), "yes" if m.converged else "no"]
         css = "failed" if is_failed(r) else ("best" if r is best else "")
         tds = "".join(f'<td class="status">{html.escape(c)}</td>' if k == 3 else
