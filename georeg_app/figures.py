@@ -64,9 +64,12 @@ def _not_drawn_note(fig: Figure, run) -> None:
                  fontsize=8, color=FAILED_GREY)
 
 
-def convergence(run) -> bytes:
+def convergence(run) -> bytes | None:
     """Residual (%) against iterations and against time / one fine-scale iteration (Fig. 11);
-    one colour per method (by its rank in the run), failed methods dashed grey."""
+    one colour per method (by its rank in the run), failed methods dashed grey; None if no
+    method has a measurement."""
+    if all(r.measurement is None for r in run.results):
+        return None
     unit = _unit(run)
     fig = Figure(figsize=(11, 4.2))
     ax_it, ax_t = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)

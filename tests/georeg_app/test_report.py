@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from georeg_app import figures
+from georeg_app import figures, maps
 from georeg_app.provenance import config_toml
 from georeg_app.report import check_claims, report_html, time_to_reach
 from georeg_app.run_view import best_method, colour_range, is_failed
@@ -208,3 +208,26 @@ def test_config_toml_reads_back():
     assert data["geometry"] == {"kind": "rectangle", "length_mm": 100.0, "width_mm": 50.0}
     assert data["method"]["levels"] == MethodConfig().levels
     assert data["method"]["tikhonov_length_mm"] == list(MethodConfig().tikhonov_length_mm)
+
+
+def test_error_scale_ignores_a_failed_method():
+    run = fake_run(node_errors=True)
+    norm = maps.error_norm(run.results)
+    huge = fake_run(node_errors=True, errors={"fe": 50.0, "t5": 0.03, "t10": 0.025, "t20": 0.04,
+                                              "geo": 0.01, "mono": 0.011},
+                    failed={"FE (multiscale)": "best"})
+    ok = [r for r in huge.results if not is_failed(r)]
+    assert maps.error_norm(huge.results).vmax == pytest.approx(maps.error_norm(ok).vmax)
+    assert maps.error_norm(huge.results).vmax < 0.1 * 50e3                 # um, FE's would be ~1e5
+    assert norm.linthresh == pytest.approx(min(
+        np.sqrt(np.mean((r.shape_error_mm * 1e3) ** 2)) for r in run.results))
+
+
+def test_every_method_failed_still_gives_a_report():
+    labels = [r.spec.label for r in fake_run().results]
+    run = fake_run(failed={label: "none" for label in labels}, node_errors=True)
+    out = figures.make_figures(run)
+    assert list(out) == ["shape_errors"]                                  # nothing else to draw
+    page = report_html(run, out)
+    assert "No best method: no method succeeded." in page and 'class="best"' not in page
+    assert page.count('<tr class="failed">') == len(labels) and 'id="claims"' not in page
