@@ -83,32 +83,56 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-# loggers shown from this level only, unless --verbose
-_CHATTY = {"matplotlib": logging.INFO, "PIL": logging.INFO,
-           "fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+#: our packages: their loggers follow --quiet/--verbose (DEBUG under --verbose)
+_OURS = ("georeg_app", "fesdic_core", "georeg_plugin", "adapters", "__main__")
+#: our chatty loggers (e.g. staged file names), shown from this level only, unless --verbose
+_CHATTY = {"fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+#: third-party loggers known to flood DEBUG/INFO: kept at WARNING even under --verbose (the
+#: root logger is at WARNING too, so any other third-party logger is quiet as well)
+_THIRD_PARTY = ("matplotlib", "PIL", "numba", "pyxel", "urllib3", "asyncio", "distributed",
+                "fsspec", "h5py", "meshio", "numexpr", "tornado", "bokeh", "dask")
+
+
+def progress_enabled(quiet: bool) -> bool:
+    """Progress bars only when not --quiet and stderr is a terminal (no bars in log files)."""
+    if quiet:
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):        # replaced or closed stderr
+        return False
+
+
+def _log_levels(quiet: bool, verbose: bool) -> dict[str, int]:
+    """Level of each logger we set: root and third parties at WARNING, ours at the level
+    of --quiet/--verbose (our chatty ones no lower than their floor unless --verbose)."""
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    levels = {"": logging.WARNING, **{name: logging.WARNING for name in _THIRD_PARTY}}
+    levels.update({name: level for name in _OURS})
+    if not verbose:
+        levels.update({name: max(level, floor) for name, floor in _CHATTY.items()})
+    return levels
 
 
 @contextlib.contextmanager
 def _logging_to_stderr(quiet: bool, verbose: bool):
-    """Log to stderr at the level of --quiet/--verbose for the duration of a command."""
-    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
-    root, quiet_loggers = logging.getLogger(), tuple(_CHATTY)
-    saved = root.level, [logging.getLogger(n).level for n in quiet_loggers]
+    """Log to stderr at the level of --quiet/--verbose for the duration of a command:
+    our loggers at WARNING/INFO/DEBUG, third-party loggers at WARNING in every case."""
+    levels = _log_levels(quiet, verbose)
+    saved = {name: logging.getLogger(name or None).level for name in levels}
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s" if verbose
                                            else f"{PROG}: %(message)s"))
+    root = logging.getLogger()
     root.addHandler(handler)
-    root.setLevel(level)
-    if not verbose:                       # chatter (e.g. staged file names) stays out of the way
-        for name, floor in _CHATTY.items():
-            logging.getLogger(name).setLevel(max(level, floor))
+    for name, lvl in levels.items():
+        logging.getLogger(name or None).setLevel(lvl)
     try:
         yield
     finally:
         root.removeHandler(handler)
-        root.setLevel(saved[0])
-        for name, lvl in zip(quiet_loggers, saved[1]):
-            logging.getLogger(name).setLevel(lvl)
+        for name, lvl in saved.items():
+            logging.getLogger(name or None).setLevel(lvl)
 
 
 def measure_specs(config: Config) -> list:
