@@ -175,7 +175,7 @@ def _run(args: argparse.Namespace) -> Path:
     from .outputs import REPORT_FILE, summary_dict, write_all
     from .pipeline import default_specs, demo_config, run_methods
 
-    progress = not args.quiet and sys.stderr.isatty()
+    progress = progress_enabled(args.quiet)
     images = truth = None
     if config is None:
         config, images, truth = demo_config(out)

@@ -14,6 +14,7 @@ import hashlib
 import importlib.metadata
 import logging
 import math
+import sys
 import tempfile
 from pathlib import Path
 from typing import Sequence
@@ -368,7 +369,7 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
                         field_mm=DEMO["field_mm"])
     specimen = dataclasses.replace(demo_specimen(), speckle_mm=speckle_mm_for(cams[0], 4.0))
     arrays = render_stereo(specimen, cams, supersample=3, noise_std=DEMO["noise_std"], seed=11,
-                           progress=logger.isEnabledFor(logging.INFO))
+                           progress=logger.isEnabledFor(logging.INFO) and sys.stderr.isatty())
     images = tuple(Image.from_array(a, source=f"demo cam{k}") for k, a in enumerate(arrays))
     rotation = np.radians(DEMO["pose_error_deg"]) * np.array([0.6, -0.48, 0.64])
     translation = DEMO["pose_error_mm"] * np.array([0.48, 0.64, -0.6])
