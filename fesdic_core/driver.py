@@ -48,9 +48,10 @@ class MeasurementSettings:
         multiplied by 2**s (a coarse pixel is 2**s fine pixels).
     fixed_point_tol_px : stagnation of the poses: largest shift of the projected nodes
         between two fixed-point iterations, in pixels of the current scale.
-    fixed_point_rtol : at a coarse scale (not the finest), the fixed point also hands over
-        to the next scale when the residual falls by less than this fraction in an
-        iteration; that scale is then reported as not stagnated.
+    fixed_point_rtol : at a coarse scale (not the finest), the shape Gauss-Newton and the
+        fixed point also hand over to the next scale when the residual falls by less than
+        this fraction in an iteration (a coarse scale only starts the next, Remark 3); at
+        the finest scale only the stagnation of p and q ends them.
     keep_stereo : when calibrating, keep the stereo relation of the initial cameras
         (6 unknowns) instead of freeing both cameras (12 unknowns).
     consistency_factor : the final residual may be at most this many times the noise
@@ -86,8 +87,9 @@ class MeasurementSettings:
 class ScaleReport:
     """How one image scale ended.
 
-    ``shape_converged``: the last shape Gauss-Newton stagnated (q); ``fixed_point_converged``:
-    the fixed point stagnated (p and q; True when not calibrating); ``noise_percent``: the
+    ``shape_converged``: the last shape Gauss-Newton stopped before its iteration limit (q
+    stagnated; at a coarse scale, or the residual did); ``fixed_point_converged``: the
+    fixed point likewise (p and q; True when not calibrating); ``noise_percent``: the
     residual the images' noise explains at this scale (:mod:`fesdic_core.noise`).
     """
 
@@ -321,6 +323,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             shape = shape_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
                                        settings.normalisation, settings.max_iter,
                                        settings.tol_mm * coarse,
+                                       residual_rtol=None if finest else settings.fixed_point_rtol,
                                        log=log, extra_mask=mask, context=context)
             q = shape.q
             total_iterations += shape.iterations
@@ -341,7 +344,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             residual = shape.residual.std_percent
             if not finest and previous_residual - residual <= settings.fixed_point_rtol * residual:
                 logger.info("scale %d: the residual stagnates; the next scale goes on", scale)
-                break                     # a coarse scale only starts the next one (Remark 3)
+                fixed_point_converged = True  # a coarse scale only starts the next (Remark 3)
+                break
             previous_residual = residual
         report = ScaleReport(scale=scale, residual_percent=shape.residual.std_percent,
                              noise_percent=noise.percent, fixed_point_iterations=fp,

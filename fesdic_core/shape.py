@@ -83,7 +83,9 @@ class ShapeResult:
     """End of a shape Gauss-Newton.
 
     ``converged``: q stagnated (the last accepted step below the tolerance, or no damped
-    step lowers the residual any more); False when the iteration limit stopped it.
+    step lowers the residual any more) or, when asked (a coarse scale), the residual
+    stagnated; False when the iteration limit stopped it. ``stop`` says which:
+    "step", "no descent", "residual" or "iteration limit".
     ``damping``: the Levenberg-Marquardt factor in force at the end (0: plain Gauss-Newton).
     """
 
@@ -92,6 +94,7 @@ class ShapeResult:
     iterations: int
     converged: bool
     damping: float = 0.0
+    stop: str = ""
 
 
 def damped(H: sps.spmatrix, mu: float) -> sps.spmatrix:
@@ -105,6 +108,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
                        max_iter: int = 20, tol_mm: float = 1e-4, max_damping: int = 8,
+                       residual_rtol: float | None = None,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
                        on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
@@ -116,7 +120,9 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     (at most ``max_damping`` times); after an accepted step ``mu`` shrinks tenfold, so the
     residual never grows. Convergence is the stagnation of q (section 2.2): the accepted
     step is below ``tol_mm`` (mm, largest node), or no damped step lowers the residual any
-    more. ``max_iter`` reached first leaves ``converged=False``.
+    more. ``residual_rtol`` (for the coarse scales of a multiscale run, which only start
+    the next scale, Remark 3) also stops it when the residual falls by less than that
+    fraction in a step. ``max_iter`` reached first leaves ``converged=False``.
     """
     def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
@@ -124,7 +130,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
 
     q = np.asarray(q0, float).copy()
     res = evaluate(q)
-    mu, converged, it = 0.0, False, 0
+    mu, converged, it, stop = 0.0, False, 0, "iteration limit"
     for it in range(1, max_iter + 1):
         std = res.std_percent
         if not np.isfinite(std):                     # no point seen: nothing to measure
@@ -138,7 +144,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                 break
             mu = max(10.0 * mu, 1e-4)
         else:                               # no damped step lowers the residual: q is stagnant
-            converged = True
+            converged, stop = True, "no descent"
             logger.debug("shape GN scale %d it %d: no damped step lowers the residual (%.4f%%); "
                          "stagnant", scale, it, std)
             break
@@ -154,7 +160,10 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                      scale, it, std, res.std_percent, step, mu)
         mu = mu / 10.0 if mu > 1e-8 else 0.0
         if step < tol_mm:
-            converged = True
+            converged, stop = True, "step"                               # q stagnates
+            break
+        if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
+            converged, stop = True, "residual"
             break
     return ShapeResult(q=q, residual=dataclasses.replace(res, dr_dX=None), iterations=it,
-                       converged=converged, damping=mu)
+                       converged=converged, damping=mu, stop=stop)
