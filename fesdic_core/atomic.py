@@ -1,25 +1,59 @@
 """Atomic output files: written under a temporary name beside the target, then renamed.
 
 A reader (or a crashed run) never sees a half-written file: either the old file or the
-complete new one. The temporary file gets the permissions of a newly created file
-(``0666`` less the process umask), not the owner-only ``0600`` of :func:`tempfile.mkstemp`.
+complete new one. The temporary file is created with mode ``0666`` and the kernel applies
+the process umask, as for any new file (not the owner-only ``0600`` of
+:func:`tempfile.mkstemp`). Nothing here changes the umask, so writers may run on several
+threads at once.
 """
 from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "public_mode"]
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "public_mode",
+           "process_umask"]
+
+#: the umask assumed where the system does not tell it (no ``/proc/self/status``)
+DEFAULT_UMASK = 0o022
+
+
+def process_umask() -> int:
+    """The umask of this process, read without changing it.
+
+    Linux reports it in ``/proc/self/status`` (line ``Umask:``); elsewhere the usual
+    :data:`DEFAULT_UMASK` (``0o022``) is assumed. Calling ``os.umask`` twice to read it
+    would briefly set a process-wide umask of 0 under the feet of other threads.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    return DEFAULT_UMASK
 
 
 def public_mode(directory: bool = False) -> int:
     """Mode of a newly created file (``0o666``) or folder (``0o777``) under the current umask."""
-    umask = os.umask(0)
-    os.umask(umask)
-    return (0o777 if directory else 0o666) & ~umask
+    return (0o777 if directory else 0o666) & ~process_umask()
+
+
+def _create_temporary(folder: Path, prefix: str, suffix: str) -> Path:
+    """Create a new empty file ``folder/prefix<random>suffix`` with the mode of a new file."""
+    for _ in range(100):
+        candidate = folder / f"{prefix}{secrets.token_hex(6)}{suffix}"
+        try:
+            fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # less umask
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return candidate
+    raise FileExistsError(f"{folder}: no free temporary name {prefix}*{suffix}")
 
 
 @contextlib.contextmanager
@@ -33,13 +67,10 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     path = Path(path)
     if not path.parent.is_dir():
         raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
-                               suffix=path.suffix if suffix is None else suffix)
-    os.close(fd)
-    tmp = Path(tmp)
+    tmp = _create_temporary(path.parent, f".{path.name}.",
+                            path.suffix if suffix is None else suffix)
     try:
         yield tmp
-        os.chmod(tmp, public_mode())
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
