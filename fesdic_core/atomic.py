@@ -12,10 +12,10 @@ import contextlib
 import os
 import secrets
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "public_mode",
-           "process_umask"]
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "temporary_folder",
+           "public_mode", "process_umask"]
 
 #: the umask assumed where the system does not tell it (no ``/proc/self/status``)
 DEFAULT_UMASK = 0o022
@@ -43,17 +43,30 @@ def public_mode(directory: bool = False) -> int:
     return (0o777 if directory else 0o666) & ~process_umask()
 
 
-def _create_temporary(folder: Path, prefix: str, suffix: str) -> Path:
-    """Create a new empty file ``folder/prefix<random>suffix`` with the mode of a new file."""
+def _create_unique(folder: Path, prefix: str, suffix: str,
+                   create: Callable[[Path], None]) -> Path:
+    """``create(folder/prefix<random>suffix)`` for a name that does not exist yet."""
     for _ in range(100):
         candidate = folder / f"{prefix}{secrets.token_hex(6)}{suffix}"
         try:
-            fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # less umask
+            create(candidate)
         except FileExistsError:
             continue
-        os.close(fd)
         return candidate
     raise FileExistsError(f"{folder}: no free temporary name {prefix}*{suffix}")
+
+
+def _new_file(path: Path) -> None:
+    os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))   # less the umask
+
+
+def temporary_folder(parent: str | os.PathLike, prefix: str) -> Path:
+    """Create a new empty folder ``parent/prefix<random>`` with a new folder's mode.
+
+    Unlike :func:`tempfile.mkdtemp` (owner-only ``0700``) the folder gets ``0777`` less the
+    umask, applied by the kernel, so it can be published (renamed) as it is.
+    """
+    return _create_unique(Path(parent), prefix, "", lambda p: os.mkdir(p, 0o777))
 
 
 @contextlib.contextmanager
@@ -67,8 +80,8 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     path = Path(path)
     if not path.parent.is_dir():
         raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
-    tmp = _create_temporary(path.parent, f".{path.name}.",
-                            path.suffix if suffix is None else suffix)
+    tmp = _create_unique(path.parent, f".{path.name}.",
+                         path.suffix if suffix is None else suffix, _new_file)
     try:
         yield tmp
         os.replace(tmp, path)

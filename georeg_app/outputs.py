@@ -27,13 +27,12 @@ import math
 import os
 import re
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fesdic_core.atomic import public_mode, write_bytes_atomic, write_text_atomic
+from fesdic_core.atomic import temporary_folder, write_bytes_atomic, write_text_atomic
 
 logger = logging.getLogger(__name__)
 
@@ -91,8 +90,7 @@ class OutputWriter:
         self.out_dir.parent.mkdir(parents=True, exist_ok=True)
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise NotADirectoryError(f"output folder {self.out_dir} exists and is not a folder")
-        self.staging = Path(tempfile.mkdtemp(dir=self.out_dir.parent,
-                                             prefix=f".{self.out_dir.name}.staging-"))
+        self.staging = temporary_folder(self.out_dir.parent, f".{self.out_dir.name}.staging-")
         return self
 
     def path(self, name: str) -> Path:
@@ -129,7 +127,6 @@ class OutputWriter:
         if missing:
             raise RuntimeError(f"outputs announced but not written: {', '.join(missing)}")
         if not self.out_dir.exists():
-            os.chmod(staging, public_mode(directory=True))   # mkdtemp made it owner-only
             os.replace(staging, self.out_dir)                # the whole folder at once
             staging.mkdir()                                  # (rmtree target of __exit__)
         else:

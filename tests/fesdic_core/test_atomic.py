@@ -5,7 +5,7 @@ import stat
 import pytest
 
 from fesdic_core.atomic import (DEFAULT_UMASK, atomic_path, process_umask, public_mode,
-                                 write_bytes_atomic, write_text_atomic)
+                                 temporary_folder, write_bytes_atomic, write_text_atomic)
 
 
 def _mode(path):
@@ -67,3 +67,14 @@ def test_umask_falls_back_to_the_usual_default_without_proc(monkeypatch):
     monkeypatch.setattr(builtins, "open", no_proc)
     assert process_umask() == DEFAULT_UMASK == 0o022
     assert public_mode() == 0o644 and public_mode(directory=True) == 0o755
+
+
+def test_temporary_folder_has_a_new_folders_mode(tmp_path):
+    old = os.umask(0o027)
+    try:
+        a = temporary_folder(tmp_path, ".out.staging-")
+        b = temporary_folder(tmp_path, ".out.staging-")
+    finally:
+        os.umask(old)
+    assert a != b and a.parent == b.parent == tmp_path and a.name.startswith(".out.staging-")
+    assert _mode(a) == _mode(b) == 0o750 and list(a.iterdir()) == []
