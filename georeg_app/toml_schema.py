@@ -17,15 +17,17 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-__all__ = ["ConfigError", "ConfigFileNotFoundError", "Table", "load_toml", "show",
-           "integer", "count", "number", "positive", "boolean", "string", "one_of",
-           "strings", "vector", "array", "numbers", "pair", "check", "resolve_path", "existing_file"]
+__all__ = ["ConfigError", "ConfigFileNotFoundError", "Table", "load_toml", "show", "show_key",
+           "show_path", "integer", "count", "number", "positive", "boolean", "string", "table",
+           "table_list", "one_of", "strings", "vector", "array", "numbers", "pair", "check",
+           "resolve_path", "existing_file"]
 
 Converter = Callable[[Any], Any]
 
@@ -72,6 +74,20 @@ def show(value: Any) -> str:
     return str(value)
 
 
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def show_key(key: str) -> str:
+    """A key as TOML writes it: bare if it can be, else quoted (so a message stays one line)."""
+    return key if _BARE_KEY.fullmatch(key) else json.dumps(key)
+
+
+def show_path(path: Path) -> str:
+    """A path as it is, or quoted if it holds characters that do not print (newlines...)."""
+    text = str(path)
+    return text if text.isprintable() else json.dumps(text)
+
+
 class Table:
     """The keys of one TOML table, taken with type checks; leftovers are unknown keys.
 
@@ -95,6 +111,7 @@ class Table:
         if key is None:
             at = self.where
         else:
+            key = show_key(key)
             at = f"{self.where} {key}" if self.where else f"[{key}]"   # top level: a section
         return cls(f"{self.source}: {at}: {message}" if at else f"{self.source}: {message}")
 
@@ -164,6 +181,20 @@ def boolean(value: Any) -> bool:
 def string(value: Any) -> str:
     """A string."""
     if not isinstance(value, str):
+        raise TypeError
+    return value
+
+
+def table(value: Any) -> dict:
+    """A table (checked again, key by key, by a :class:`Table`)."""
+    if not isinstance(value, dict):
+        raise TypeError
+    return value
+
+
+def table_list(value: Any) -> list:
+    """An array (of tables, each checked by a :class:`Table`)."""
+    if not isinstance(value, list):
         raise TypeError
     return value
 
@@ -246,5 +277,5 @@ def existing_file(table: Table, key: str, value: str | None, base: Path) -> Path
         return None
     path = resolve_path(value, base)
     if not path.is_file():
-        raise table.error(key, f"file not found: {path}", ConfigFileNotFoundError)
+        raise table.error(key, f"file not found: {show_path(path)}", ConfigFileNotFoundError)
     return path

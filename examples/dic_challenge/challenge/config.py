@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from georeg_app.toml_schema import (ConfigError, Table, array, count, existing_file, integer,
-                                    load_toml, number, one_of, pair, positive, string, strings)
+                                    load_toml, number, one_of, pair, positive, string, strings,
+                                    table, table_list)
 
 __all__ = ["ConfigError", "MAX_LEVELS", "Landmark", "Feature", "Specimen", "Nominal", "Method",
            "Analysis", "Face", "load_specimen", "load_face"]
@@ -135,14 +136,18 @@ def _scales(v: Any) -> tuple[int, ...]:
 
 
 def _file(table: Table, key: str, base: Path) -> Path:
-    return existing_file(table, key, table.take(key, string, "a file path (string)",
-                                                required=True), base)
+    """The required existing file ``key`` (relative to ``base``), resolved."""
+    value = table.take(key, string, "a file path (string)", required=True)
+    return existing_file(table, key, value, base).resolve()
 
 
-def _tables(data: Any, where: str, source: Path) -> list:
-    if not isinstance(data, list):
-        raise ConfigError(f"{source}: {where}: expected an array of tables ([[...]])")
-    return data
+def _feature_name(table: Table, key: str, name: str, specimen: Specimen) -> str:
+    """``name``, which must be one of the specimen's [[features]]."""
+    known = [f.name for f in specimen.features]
+    if name not in known:
+        raise table.error(key, f"no [[features]] named {name!r} in {specimen.source.name} "
+                               f"(known: {', '.join(known)})")
+    return name
 
 
 def _feature(item: Any, i: int, source: Path) -> Feature:
@@ -173,15 +178,14 @@ def load_specimen(path: str | Path) -> Specimen:
     source = Path(path).resolve()
     top = Table(load_toml(source), "", source)
     base = source.parent
-    images = Table(top.take("images", dict, "a table", required=True), "[images]", source)
+    images = Table(top.take("images", table, "a table", required=True), "[images]", source)
     cam0, cam1 = _file(images, "cam0", base), _file(images, "cam1", base)
     images.finish()
-    cameras = Table(top.take("cameras", dict, "a table", required=True), "[cameras]", source)
+    cameras = Table(top.take("cameras", table, "a table", required=True), "[cameras]", source)
     csv = _file(cameras, "pyvale_csv", base)
     cameras.finish()
     landmarks = []
-    for i, item in enumerate(_tables(top.take("landmarks", list, "[[landmarks]]", required=True),
-                                     "[[landmarks]]", source)):
+    for i, item in enumerate(top.take("landmarks", table_list, "[[landmarks]]", required=True)):
         t = Table(item, f"[[landmarks]][{i}]", source)
         landmarks.append(Landmark(t.take("xyz_mm", array((3,)), "3 numbers (mm)", required=True),
                                   t.take("cam0_px", array((2,)), "2 numbers (px)", required=True),
@@ -190,7 +194,7 @@ def load_specimen(path: str | Path) -> Specimen:
     if len(landmarks) < 4:
         raise ConfigError(f"{source}: [[landmarks]]: at least 4 are needed, got {len(landmarks)}")
     features = tuple(_feature(item, i, source) for i, item in enumerate(
-        _tables(top.take("features", list, "[[features]]", required=True), "[[features]]", source)))
+        top.take("features", table_list, "[[features]]", required=True)))
     top.finish()
     return Specimen(source, cam0, cam1, csv, tuple(landmarks), features)
 
@@ -217,7 +221,7 @@ def _nominal(item: Any, i: int, source: Path, specimen: Specimen) -> Nominal:
         if getattr(nominal, key) is None:
             raise t.error(key.replace("line_mm", "axis_mm"), f"missing required key (kind = {kind!r})")
     for hole in nominal.holes:
-        specimen.feature(hole)
+        _feature_name(t, "holes", hole, specimen)
     if nominal.levels > MAX_LEVELS:
         raise t.error("levels", f"must be <= {MAX_LEVELS} (each level doubles the spline "
                                 f"elements), got {nominal.levels}")
@@ -232,16 +236,16 @@ def load_face(path: str | Path) -> Face:
     """Read a face file and the specimen file it names."""
     source = Path(path).resolve()
     top = Table(load_toml(source), "", source)
-    face = Table(top.take("face", dict, "a table", required=True), "[face]", source)
+    face = Table(top.take("face", table, "a table", required=True), "[face]", source)
     name = face.take("name", string, "a string", required=True)
     specimen = load_specimen(_file(face, "specimen", source.parent))
     occluders = face.take("occluders", strings, "a list of feature names", default=())
     face.finish()
     for o in occluders:
-        specimen.feature(o)
+        _feature_name(face, "occluders", o, specimen)
     nominals = tuple(_nominal(item, i, source, specimen) for i, item in enumerate(
-        _tables(top.take("nominal", list, "[[nominal]]", required=True), "[[nominal]]", source)))
-    m = Table(top.take("method", dict, "a table", default={}), "[method]", source)
+        top.take("nominal", table_list, "[[nominal]]", required=True)))
+    m = Table(top.take("method", table, "a table", default={}), "[method]", source)
     d = Method()
     method = Method(
         scales=m.take("scales", _scales, "a list of integers >= 0", default=d.scales),
@@ -254,7 +258,7 @@ def load_face(path: str | Path) -> Face:
     m.finish()
     if list(method.scales) != sorted(set(method.scales), reverse=True):
         raise m.error("scales", f"must decrease (coarse to fine), got {list(method.scales)}")
-    a = Table(top.take("analysis", dict, "a table", default={}), "[analysis]", source)
+    a = Table(top.take("analysis", table, "a table", default={}), "[analysis]", source)
     analysis = Analysis(
         flatness_polygon_mm=a.take("flatness_polygon_mm", lambda v: array((len(v), 2))(v),
                                    "a list of [x, y] (mm)"),
@@ -263,6 +267,6 @@ def load_face(path: str | Path) -> Face:
         edge_margin_mm=a.take("edge_margin_mm", number, "a number (mm)", default=0.0))
     a.finish()
     if analysis.ring_feature is not None:
-        specimen.feature(analysis.ring_feature)
+        _feature_name(a, "ring_feature", analysis.ring_feature, specimen)
     top.finish()
     return Face(source, name, specimen, occluders, nominals, method, analysis)
