@@ -254,19 +254,12 @@ def test_the_valid_documents_load(tmp_path, schema):
     assert len(config.cameras.landmarks) == (4 if "landmarks" in schema.doc else 0)
 
 
+@pytest.mark.parametrize("schema", [GEOREG_JSON_CAMERAS, GEOREG_PYVALE], ids=["json", "pyvale"])
 @FUZZ
-@given(doc=broken(GEOREG_JSON_CAMERAS))
-def test_broken_georeg_config_with_json_cameras_is_one_config_error(tmp_path, doc):
+@given(data=st.data())
+def test_broken_georeg_config_is_one_config_error(tmp_path, schema, data):
     path = _georeg_folder(tmp_path) / "config.toml"
-    path.write_text(_toml(doc))
-    _assert_one_config_error(load_config, path, tmp_path)
-
-
-@FUZZ
-@given(doc=broken(GEOREG_PYVALE))
-def test_broken_georeg_config_with_landmarks_is_one_config_error(tmp_path, doc):
-    path = _georeg_folder(tmp_path) / "config.toml"
-    path.write_text(_toml(doc))
+    path.write_text(_toml(data.draw(broken(schema))))
     _assert_one_config_error(load_config, path, tmp_path)
 
 
