@@ -107,15 +107,15 @@ class WorkerPool:
         detached = finalizer.detach() if finalizer is not None else None
         return None if detached is None else detached[1]      # (pool, shutdown, args, kwargs)
 
-    def _executor_now(self) -> ThreadPoolExecutor:
-        with self._lock:
-            if self._executor is None:
-                executor = ThreadPoolExecutor(self._threads, thread_name_prefix="fesdic",
-                                              initializer=_mark_worker)
-                # shut down when the pool is collected or, at the latest, at interpreter exit
-                self._finalizer = weakref.finalize(self, executor.shutdown, wait=False)
-                self._executor = executor
-            return self._executor
+    def _start(self) -> ThreadPoolExecutor:
+        """The running executor, started if needed (under the lock)."""
+        if self._executor is None:
+            executor = ThreadPoolExecutor(self._threads, thread_name_prefix="fesdic",
+                                          initializer=_mark_worker)
+            # shut down when the pool is collected or, at the latest, at interpreter exit
+            self._finalizer = weakref.finalize(self, executor.shutdown, wait=False)
+            self._executor = executor
+        return self._executor
 
     def for_each_span(self, work: Callable[[int], None], n_spans: int) -> None:
         """Call ``work(k)`` for ``k`` in ``range(n_spans)`` on the pool's threads.
@@ -127,7 +127,9 @@ class WorkerPool:
             for k in range(n_spans):
                 work(k)
             return
-        for _ in self._executor_now().map(work, range(n_spans)):
+        with self._lock:            # all spans handed over before a resize or close may act
+            results = self._start().map(work, range(n_spans))
+        for _ in results:
             pass
 
     def for_each_block(self, work: Callable[[slice], None], n: int, block: int) -> None:

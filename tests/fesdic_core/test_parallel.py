@@ -116,3 +116,25 @@ def test_default_pool_size_from_environment_and_context_manager(monkeypatch):
         assert parallel.default_pool().threads == 2
     finally:
         parallel.set_threads(previous)
+
+
+def test_resizing_while_other_threads_use_the_pool():
+    pool, errors, results = WorkerPool(2), [], []
+
+    def user():
+        try:
+            for _ in range(20):
+                results.append(_squares(pool, n=300, block=7)[0])
+        except Exception as exc:                                   # noqa: BLE001 (reported)
+            errors.append(exc)
+    users = [threading.Thread(target=user) for _ in range(3)]
+    for t in users:
+        t.start()
+    for n in (3, 1, 2, 4, 2) * 4:
+        pool.threads = n
+    for t in users:
+        t.join(timeout=60)
+    pool.close()
+    assert not errors and len(results) == 60
+    for out in results:
+        np.testing.assert_array_equal(out, np.arange(300.0) ** 2)
