@@ -151,35 +151,44 @@ def _get(doc, path):
     return doc
 
 
+def _break(draw, schema: Schema, doc: dict) -> bool:
+    """Break ``doc`` once, in place; False if the place to break is no longer there."""
+    how = draw(st.sampled_from(["value", "value", "missing", "unknown", "table"]))
+    if how == "missing":
+        path = draw(st.sampled_from(schema.required))
+        parent, key = _get(doc, path[:-1]), path[-1]
+        if isinstance(parent, dict) and isinstance(key, str) and key in parent:
+            del parent[key]
+            return True
+        if isinstance(parent, list) and isinstance(key, int) and key < len(parent):
+            del parent[key:]                                     # fewer [[landmarks]]
+            return True
+        return False
+    if how == "value":
+        path = draw(st.sampled_from(sorted(schema.values, key=str)))
+        bad = draw(BAD[schema.values[path]])
+    elif how == "unknown":
+        where = draw(st.sampled_from(sorted(schema.tables, key=str)))
+        path = (*where, draw(_key.filter(lambda k: k not in schema.tables[where])))
+        bad = draw(_nested)
+    else:
+        path = draw(st.sampled_from([p for p in sorted(schema.tables, key=str) if p]))
+        bad = draw(_not_a_table)
+    parent, key = _get(doc, path[:-1]), path[-1]
+    if isinstance(parent, dict) and isinstance(key, str) or (
+            isinstance(parent, list) and isinstance(key, int) and key < len(parent)):
+        parent[key] = bad
+        return True
+    return False
+
+
 @st.composite
 def broken(draw, schema: Schema) -> dict:
     """A copy of ``schema.doc`` broken one to three times."""
     doc = copy.deepcopy(schema.doc)
-    for _ in range(draw(st.integers(1, 3))):
-        how = draw(st.sampled_from(["value", "value", "missing", "unknown", "table"]))
-        if how == "value":
-            path = draw(st.sampled_from(sorted(schema.values, key=str)))
-            parent, bad = _get(doc, path[:-1]), draw(BAD[schema.values[path]])
-        elif how == "missing":
-            path = draw(st.sampled_from(schema.required))
-            parent, key = _get(doc, path[:-1]), path[-1]
-            if isinstance(parent, dict) and isinstance(key, str):
-                parent.pop(key, None)
-            elif isinstance(parent, list) and isinstance(key, int):   # fewer [[landmarks]]
-                del parent[key:]
-            continue
-        elif how == "unknown":
-            where = draw(st.sampled_from(sorted(schema.tables, key=str)))
-            parent = _get(doc, where)
-            path = (*where, draw(_key.filter(lambda k: k not in schema.tables[where])))
-            bad = draw(_nested)
-        else:
-            path = draw(st.sampled_from([p for p in sorted(schema.tables, key=str) if p]))
-            parent, bad = _get(doc, path[:-1]), draw(_not_a_table)
-        key = path[-1]
-        if isinstance(parent, dict) and isinstance(key, str) or (
-                isinstance(parent, list) and isinstance(key, int) and key < len(parent)):
-            parent[key] = bad
+    assert _break(draw, schema, doc), "the schema names a place its document lacks"
+    for _ in range(draw(st.integers(0, 2))):
+        _break(draw, schema, doc)                # may find its place gone: then a no-op
     return doc
 
 
@@ -230,7 +239,8 @@ GEOREG_JSON_CAMERAS = Schema(
 _LANDMARK = {"xyz_mm": [0.0, 0.0, 0.0], "cam0_px": [10.0, 20.0], "cam1_px": [12.0, 21.0]}
 GEOREG_PYVALE = Schema(
     {"images": {"cam0": "left.tif", "cam1": "right.tif"}, "cameras": {"pyvale_csv": "calib.csv"},
-     "landmarks": [dict(_LANDMARK) for _ in range(4)], "geometry": _GEOMETRY, "method": _METHOD},
+     "landmarks": [dict(_LANDMARK) for _ in range(4)], "geometry": _GEOMETRY, "method": _METHOD,
+     "output": {"dir": "out"}},
     {**_COMMON_VALUES, ("cameras", "pyvale_csv"): "path", ("cameras", "file"): "path",
      **{("landmarks", i, key): kind for i in range(4)
         for key, kind in (("xyz_mm", "vector3"), ("cam0_px", "vector2"), ("cam1_px", "vector2"))}},
