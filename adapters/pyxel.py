@@ -14,7 +14,11 @@ its ``MultiscaleInit``), and handles three measured quirks of pyxel-dic 2026.10:
   the levels are run here, one ``Correlate`` each;
 - ``Correlate`` integrates with ``m.DICIntegrationFast(cam, aes)`` against the
   signature ``(n, G)`` (it works by accident and also builds gradients); the adapter
-  integrates each scale itself so that branch is never taken.
+  integrates each scale itself so that branch is never taken;
+- ``Correlate`` returns ``(U, res)`` only and keeps no history: the number of
+  Gauss-Newton iterations is counted on the DIC engine handed to it, whose
+  ``ComputeRHS`` it calls exactly once per iteration (:class:`_CountingEngine`),
+  not parsed from what it prints.
 
 Integration rule of each scale: by default pyxel's pixel rule ``m.DICIntegration(cam_s)``
 (about one point per pixel of the scale in every element, the rule of pyxel's own
@@ -73,6 +77,27 @@ def _pyxel_output():
     text = buffer.getvalue().strip()
     if text:
         logger.debug("pyxel: %s", text.replace("\n", " | "))
+
+
+class _CountingEngine:
+    """A pyxel DIC engine that counts the right-hand sides asked of it.
+
+    ``pyxel.Correlate`` calls ``dic.ComputeRHS`` once at the start of every Gauss-Newton
+    iteration (``ComputeRHS_EB`` with ``EB=True``, not used here) and returns no
+    iteration count, so the count of those calls is the number of iterations. Every
+    other attribute is the wrapped engine's.
+    """
+
+    def __init__(self, engine: Any) -> None:
+        self._engine = engine
+        self.rhs_calls = 0
+
+    def ComputeRHS(self, *args: Any, **kwargs: Any) -> Any:  # noqa: N802 (pyxel's name)
+        self.rhs_calls += 1
+        return self._engine.ComputeRHS(*args, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._engine, name)
 
 
 def _connected(m: Any) -> Any:
@@ -255,11 +280,12 @@ class PyxelAdapter:
         """One pyxel ``Correlate`` at ``image_scale``; returns (U, residual std, iterations)."""
         f, g, m, cam, dic, H = self._scale(image_scale)
         U0 = np.zeros(self.n_dof) if U0 is None else np.asarray(U0, dtype=float)
-        with _pyxel_output() as out:
-            U, res = self._pyxel.Correlate(f, g, m, cam, dic=dic, H=H, U0=U0, Basis=basis,
+        engine = _CountingEngine(dic)
+        with _pyxel_output():
+            U, res = self._pyxel.Correlate(f, g, m, cam, dic=engine, H=H, U0=U0, Basis=basis,
                                            eps=self.eps, maxiter=self.maxiter, disp=True,
                                            direct=self.direct)
-        n_iterations = out.getvalue().count("Iter #")
+        n_iterations = engine.rhs_calls
         if n_iterations >= self.maxiter:
             logger.warning("pyxel Correlate at scale %d stopped at maxiter = %d without "
                            "reaching eps = %g", image_scale, self.maxiter, self.eps)

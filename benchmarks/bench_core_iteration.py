@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+from fesdic_core import parallel
+
 
 def _machine() -> str:
     return (f"{platform.platform()}, {platform.processor() or platform.machine()}, "
@@ -102,7 +104,7 @@ def interpolation(repeat: int) -> None:
     if image_module.COMPILED_KERNEL:
         t, _ = _median_time(lambda: image.evaluate_with_gradient(xy), repeat)
         print(f"  compiled kernel, value + gradient: {t:.3f} s ({image_module.__name__}, "
-              f"{os.environ.get('FESDIC_THREADS', 'default')} threads)")
+              f"{parallel.default_pool().threads} threads)")
     value, grad = np.empty(n), np.empty((n, 2))
     t, _ = _median_time(lambda: image_module._evaluate_numpy(image._padded, h, w, xy, value, grad),
                         max(1, repeat // 2))
@@ -132,11 +134,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--threads", type=int, default=None,
-                        help="threads of the core (sets FESDIC_THREADS; default: all CPUs)")
+                        help="threads of the core (default: FESDIC_THREADS, else all CPUs)")
     args = parser.parse_args()
     if args.threads is not None:
-        os.environ["FESDIC_THREADS"] = str(args.threads)           # read at import of the core
-    print(f"machine: {_machine()}; threads: {os.environ.get('FESDIC_THREADS', 'all CPUs')}")
+        parallel.set_threads(args.threads)
+    print(f"machine: {_machine()}; threads: {parallel.default_pool().threads}")
     iteration(args.repeat)
     interpolation(args.repeat)
 

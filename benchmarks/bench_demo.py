@@ -14,7 +14,6 @@ import argparse
 import logging
 import os
 import platform
-import tempfile
 import time
 
 import numpy as np
@@ -33,7 +32,7 @@ def main() -> None:
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cpus")
     t = time.perf_counter()
-    config, images, truth = demo_config(tempfile.mkdtemp())
+    config, images, truth = demo_config("demo_out")          # nothing is written there
     print(f"render: {time.perf_counter() - t:.1f} s")
     specs = default_specs(config)
     if args.methods == "georeg":

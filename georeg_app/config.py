@@ -50,17 +50,18 @@ A complete example (every key; optional keys show their default in parentheses):
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import logging
-import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
+
+from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
+                          existing_file, integer, load_toml, number, numbers, resolve_path,
+                          show, string, vector)
 
 logger = logging.getLogger(__name__)
 
@@ -69,14 +70,6 @@ GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh")
 NORMALISATIONS = ("element", "global", "none")
 DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0)
 DEFAULT_OUTPUT_DIR = "georeg_out"
-
-
-class ConfigError(ValueError):
-    """A configuration file is unusable; the message names the file, section and key."""
-
-
-class ConfigFileNotFoundError(ConfigError, FileNotFoundError):
-    """A file referenced by the configuration does not exist."""
 
 
 @dataclass(frozen=True)
@@ -164,111 +157,10 @@ class Config:
 
 
 # --------------------------------------------------------------------------- reading helpers
-
-def _show(value: Any) -> str:
-    """A value as it would read in TOML (strings quoted, booleans lower case)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, dict):
-        return "a table"
-    if isinstance(value, list):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    return str(value)
-
-
-class _Table:
-    """Keys of one TOML table, popped with type checks; leftovers are unknown keys."""
-
-    def __init__(self, data: Any, where: str, source: Path):
-        self.where, self.source = where, source
-        if not isinstance(data, dict):
-            raise self.error(None, f"expected a table, got {_show(data)}")
-        self.data = dict(data)
-        self.known: list[str] = []
-
-    def error(self, key: str | None, message: str, cls: type = ConfigError) -> ConfigError:
-        if key is None:
-            at = self.where
-        else:
-            at = f"{self.where} {key}" if self.where else f"[{key}]"   # top level: a section
-        return cls(f"{self.source}: {at}: {message}" if at else f"{self.source}: {message}")
-
-    def take(self, key: str, convert: Callable[[Any], Any], what: str, required: bool = False,
-             default: Any = None) -> Any:
-        self.known.append(key)
-        if key not in self.data:
-            if required:
-                raise self.error(key, "missing required key")
-            return default
-        value = self.data.pop(key)
-        try:
-            return convert(value)
-        except (TypeError, ValueError):
-            raise self.error(key, f"expected {what}, got {_show(value)}") from None
-
-    def finish(self) -> None:
-        for key in self.data:
-            close = difflib.get_close_matches(key, self.known, n=1, cutoff=0.5)
-            hint = f" (did you mean {close[0]}?)" if close else f" (known keys: {', '.join(self.known)})"
-            raise self.error(key, "unknown key" + hint)
-
-
-def _integer(value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError
-    return value
-
-
-def _number(value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise TypeError
-    return float(value)
-
-
-def _boolean(value: Any) -> bool:
-    if not isinstance(value, bool):
-        raise TypeError
-    return value
-
-
-def _string(value: Any) -> str:
-    if not isinstance(value, str):
-        raise TypeError
-    return value
-
-
-def _vector(n: int) -> Callable[[Any], np.ndarray]:
-    def convert(value: Any) -> np.ndarray:
-        if not isinstance(value, list) or len(value) != n:
-            raise TypeError
-        out = np.array([_number(v) for v in value])
-        out.setflags(write=False)
-        return out
-    return convert
-
-
-def _numbers(value: Any) -> tuple[float, ...]:
-    values = value if isinstance(value, list) else [value]
-    if not values:
-        raise ValueError
-    return tuple(_number(v) for v in values)
-
-
-def _check(table: _Table, key: str, value: Any, ok: bool, requirement: str) -> None:
-    if value is not None and not ok:
-        raise table.error(key, f"must be {requirement}, got {_show(value)}")
-
-
-def _existing_file(table: _Table, key: str, value: str | None, base: Path) -> Path | None:
-    if value is None:
-        return None
-    path = Path(value).expanduser()
-    path = path if path.is_absolute() else base / path
-    if not path.is_file():
-        raise table.error(key, f"file not found: {path}", ConfigFileNotFoundError)
-    return path
+# the shared machinery of georeg_app.toml_schema, under the names the sections use
+_Table, _show, _check, _existing_file = Table, show, check, existing_file
+_integer, _number, _boolean, _string, _vector, _numbers = (integer, number, boolean, string,
+                                                           vector, numbers)
 
 
 # --------------------------------------------------------------------------- sections
@@ -378,8 +270,7 @@ def _output(data: Any, source: Path, base: Path) -> OutputConfig:
     t = _Table(data, "[output]", source)
     out = t.take("dir", _string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
     t.finish()
-    path = Path(out).expanduser()
-    return OutputConfig(path if path.is_absolute() else base / path)
+    return OutputConfig(resolve_path(out, base))
 
 
 def load_config(path: str | os.PathLike) -> Config:
@@ -393,13 +284,7 @@ def load_config(path: str | os.PathLike) -> Config:
         On a TOML syntax error, an unknown key, a wrong type or value, a missing key.
     """
     source = Path(path)
-    if not source.is_file():
-        raise ConfigFileNotFoundError(f"{source}: configuration file not found")
-    try:
-        with open(source, "rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{source}: not valid TOML: {err}") from None
+    data = load_toml(source)
     base = source.resolve().parent
     top = _Table(data, "", source)
     images = top.take("images", lambda v: v, "a table", required=True)

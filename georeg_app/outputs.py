@@ -29,13 +29,12 @@ import math
 import os
 import re
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fesdic_core.atomic import public_mode, write_bytes_atomic, write_text_atomic
+from fesdic_core.atomic import temporary_folder, write_bytes_atomic, write_text_atomic
 
 logger = logging.getLogger(__name__)
 
@@ -94,8 +93,7 @@ class OutputWriter:
         self.out_dir.parent.mkdir(parents=True, exist_ok=True)
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise NotADirectoryError(f"output folder {self.out_dir} exists and is not a folder")
-        self.staging = Path(tempfile.mkdtemp(dir=self.out_dir.parent,
-                                             prefix=f".{self.out_dir.name}.staging-"))
+        self.staging = temporary_folder(self.out_dir.parent, f".{self.out_dir.name}.staging-")
         return self
 
     def path(self, name: str) -> Path:
@@ -128,7 +126,6 @@ class OutputWriter:
             logger.debug("run failed: staged outputs discarded, %s untouched", self.out_dir)
 
     def _move_in(self, staging: Path) -> None:
-        os.chmod(staging, public_mode(directory=True))       # mkdtemp made it owner-only
         os.replace(staging, self.out_dir)                    # the whole folder at once
         staging.mkdir()                                      # (rmtree target of __exit__)
 
@@ -137,7 +134,7 @@ class OutputWriter:
         if missing:
             raise RuntimeError(f"outputs announced but not written: {', '.join(missing)}")
         if self.replace and self.out_dir.is_dir():           # the old folder goes as a whole
-            old = Path(tempfile.mkdtemp(dir=self.out_dir.parent, prefix=f".{self.out_dir.name}.old-"))
+            old = temporary_folder(self.out_dir.parent, f".{self.out_dir.name}.old-")
             os.replace(self.out_dir, old / "previous")
             try:
                 self._move_in(staging)

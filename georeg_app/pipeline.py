@@ -14,8 +14,10 @@ import hashlib
 import importlib.metadata
 import logging
 import math
+import shutil
 import sys
 import tempfile
+import weakref
 from pathlib import Path
 from typing import Sequence
 
@@ -362,8 +364,10 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
 
     Two cameras at 25 degrees, about 1 Mpx each, 4 px speckle, noise of 2 gray levels.
     The cameras of the config are the exact ones with the specimen pose perturbed by
-    0.5 degree and 0.5 mm (the fixed point must find it). Inputs are written to a
-    temporary folder (the output folder only receives the results).
+    0.5 degree and 0.5 mm (the fixed point must find it). They are written to a temporary
+    folder (the output folder only receives the results) that belongs to the returned
+    ``config.cameras`` (shared by copies such as ``config.with_output_dir``): it is removed
+    when that is no longer referenced (at the end of the run), at the latest at exit.
     """
     cams = demo_cameras(image_size=DEMO["image_size"], stereo_angle_deg=DEMO["stereo_angle_deg"],
                         field_mm=DEMO["field_mm"])
@@ -375,7 +379,11 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
     translation = DEMO["pose_error_mm"] * np.array([0.48, 0.64, -0.6])
     initial = move_cameras_with_specimen(cams, translation, rotation, np.zeros(3))
     inputs = Path(tempfile.mkdtemp(prefix="georeg_demo_"))
-    write_cameras_json(inputs / "cameras.json", initial)
+    try:
+        write_cameras_json(inputs / "cameras.json", initial)
+    except BaseException:
+        shutil.rmtree(inputs, ignore_errors=True)
+        raise
     config = Config(
         images=ImagesConfig(cam0=inputs / "cam0 (rendered in memory)", cam1=inputs / "cam1 (rendered in memory)"),
         cameras=CamerasConfig(file=inputs / "cameras.json"),
@@ -384,4 +392,5 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
         method=MethodConfig(),
         output=OutputConfig(dir=Path(out_dir)),
         source=inputs / "demo (embedded)")
+    weakref.finalize(config.cameras, shutil.rmtree, inputs, ignore_errors=True)  # kept by copies
     return config, images, Truth(specimen=specimen, cameras=tuple(cams))

@@ -27,7 +27,7 @@ import json
 import logging
 import os
 import pathlib
-import tempfile
+import secrets
 
 import numpy as np
 
@@ -46,21 +46,25 @@ _IGES_UNITS_MM = {1: 25.4, 2: 1.0, 4: 304.8, 5: 1609344.0, 6: 1000.0, 7: 1.0e6,
 
 
 def _atomic_write_text(path: pathlib.Path, text: str, newline: str | None = None) -> None:
-    """Write ``text`` to a temporary file in the same folder, then ``os.replace`` it."""
+    """Write ``text`` to a new file beside ``path``, then ``os.replace`` it onto ``path``.
+
+    The plugin does not import the core (whose ``fesdic_core.atomic`` does the same for any
+    writer), so it keeps this one text writer of its own. The temporary file is created
+    with mode 0666 and the kernel applies the umask, as for any new file (``mkstemp`` would
+    give 0600); the umask itself is never read or changed.
+    """
     path = pathlib.Path(path)
     if not path.parent.is_dir():
         raise FileNotFoundError(f"{path}: folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(8)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "w", encoding="ascii" if newline else "utf-8",
                        newline=newline) as f:
             f.write(text)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)                  # as a new file, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 

@@ -4,6 +4,7 @@ A synthetic speckle pair with a known smooth displacement (made here with
 scipy.ndimage.map_coordinates, plus Gaussian noise) is correlated by pyxel on its own
 Q4 and Q9 meshes, with and without the spline basis.
 """
+import logging
 import sys
 
 import numpy as np
@@ -183,3 +184,26 @@ def test_unknown_integration_rule_is_refused():
     f, g, m, cam, _, _ = graded_strip()
     with pytest.raises(ValueError, match="integration"):
         adapter.PyxelAdapter(f, g, m, cam, integration="gauss")
+
+
+def test_iteration_count_is_the_one_pyxel_prints(speckle_pair, caplog):
+    """The count comes from the engine's ComputeRHS calls; pyxel's own "Iter #" lines
+    (captured into the debug log) must agree, on a run that converges before maxiter."""
+    f, g = speckle_pair
+    m, cam = roi_mesh(3)
+    host = adapter.PyxelAdapter(f, g, m, cam, eps=1e-3, maxiter=30)
+    with caplog.at_level(logging.DEBUG, logger=adapter.__name__):
+        _, _, n_iterations = host.correlate(None, None, 1)
+    printed = sum(r.getMessage().count("Iter #") for r in caplog.records)
+    assert 1 < n_iterations < 30
+    assert n_iterations == printed
+
+
+def test_iteration_count_is_maxiter_when_convergence_is_impossible(speckle_pair, caplog):
+    f, g = speckle_pair
+    m, cam = roi_mesh(3)
+    host = adapter.PyxelAdapter(f, g, m, cam, eps=0.0, maxiter=4)   # |dU|/|U| < 0: never
+    with caplog.at_level(logging.WARNING, logger=adapter.__name__):
+        _, _, n_iterations = host.correlate(None, None, 1)
+    assert n_iterations == 4
+    assert any("maxiter = 4" in r.getMessage() for r in caplog.records)

@@ -182,14 +182,14 @@ def test_image_arrays_are_read_only_and_caller_arrays_untouched():
 
 @pytest.mark.skipif(not image_module.COMPILED_KERNEL, reason="installed without the C kernel")
 @pytest.mark.parametrize("shape", [(37, 53), (1, 9), (200, 150)])
-def test_compiled_kernel_equals_its_numpy_twin(shape, monkeypatch):
+def test_compiled_kernel_equals_its_numpy_twin(shape):
     image = _random_image(shape, seed=3)
     xy = _random_points(image, 200_000, seed=4, pad=40.0)          # mirror folds included
     xy[::997] = np.nan
     xy[1::1009, 0] = np.inf
     h, w = image.shape
-    monkeypatch.setattr(parallel, "THREADS", 2)                     # threaded split
-    compiled = image.evaluate_with_gradient(xy)
+    with parallel.threads(2):                                       # threaded split
+        compiled = image.evaluate_with_gradient(xy)
     value, grad = np.empty(len(xy)), np.empty((len(xy), 2))
     image_module._evaluate_numpy(image._padded, h, w, xy, value, grad)
     for a, b in zip(compiled, (value, grad)):

@@ -166,3 +166,21 @@ def test_iges_read_by_independent_reader_pyiges(tmp_path):
     assert_allclose(s.weights, patch.weights.ravel(order="F"), rtol=1e-15)
     assert_allclose(s.control_points(),
                     patch.control_points.transpose(1, 0, 2).reshape(-1, 3), rtol=1e-15)
+
+
+def test_written_files_have_a_new_files_permissions_without_touching_the_umask(tmp_path,
+                                                                               monkeypatch):
+    import os
+    import stat
+    real_umask = os.umask
+    old = real_umask(0o027)
+    calls = []
+    monkeypatch.setattr(os, "umask", lambda mask: calls.append(mask) or real_umask(mask))
+    try:
+        write_spline_json(tmp_path / "s.json", _quarter_cylinder())
+        write_iges(tmp_path / "s.igs", _quarter_cylinder())
+    finally:
+        real_umask(old)
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
+    assert modes == {"s.json": 0o640, "s.igs": 0o640}             # 0666 less umask, no leftovers
+    assert calls == []
