@@ -18,7 +18,7 @@ import numpy as np
 
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
-from georeg_plugin.fe_mesh import fe_mesh_from_spline
+from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
@@ -54,8 +54,16 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
     patch : coarsest nominal spline.
     elements : number of FE elements per parametric direction (tuple), or an integer
         number of dyadic refinements of ``patch``.
-    family : "Q9" (the paper's choice) or "Q4".
+    family : "Q9" (the paper's choice, spline degree <= 2) or "Q4" (spline degree 1 only).
+
+    Raises
+    ------
+    ElementDegreeError
+        If a degree of ``patch`` exceeds the element degree (Eq. 16 needs it): e.g. "Q4" with
+        the usual degree-2 patches, whose finest spline level has more dofs than the Q4 mesh
+        has nodes (one element per knot span) and is not reproduced between them.
     """
+    check_element_degree(patch.degrees, family, f"nominal model {name!r} ({family} mesh)")
     if isinstance(elements, (int, np.integer)):
         fine, _ = refine_uniform(patch, int(elements))
     else:
@@ -73,8 +81,9 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False
     surfaces that are not planar.
     """
     normals = node_normals(model.mesh) if curved else None
+    family = model.mesh.blocks[0].family.name if model.uv is not None else None
     return multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
-                            uv=model.uv)
+                            uv=model.uv, family=family)
 
 
 def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,
