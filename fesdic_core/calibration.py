@@ -15,6 +15,7 @@ solved on the eigenvectors of the scaled ``M`` above ``rcond`` times the largest
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 from typing import Sequence
@@ -66,7 +67,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
-                         residual_rtol: float = 1e-4,
+                         residual_rtol: float = 1e-4, max_damping: int = 8,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
                          context: dict | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
@@ -78,27 +79,47 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     residual_rtol : also stop when the residual changes by less than this fraction.
+    max_damping : a step that raises the residual is retried with the Levenberg-Marquardt
+        factor ``mu`` (``M + mu diag M``) ten times larger, at most this many times; the
+        residual never grows (the divergence guard).
     """
+    def evaluate(cameras_now) -> GrayLevelResidual:
+        return gray_level_residual(X, quad, images, cameras_now, normalisation, "extrinsic",
+                                   extra_mask)
+
+    def moved(dp: np.ndarray) -> list:
+        if stereo is None:
+            return [c.with_extrinsics(c.extrinsics + dp[6 * k:6 * k + 6]) for k, c in enumerate(cams)]
+        cam0 = cams[0].with_extrinsics(cams[0].extrinsics + dp)
+        return [cam0, place_camera1(cam0, cams[1], *stereo)]
+
     cams = list(cameras)
     probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # logs each step in px
-    converged, it, previous = False, 0, np.inf
+    res = evaluate(cams)
+    converged, it, mu = False, 0, 0.0
     for it in range(1, max_iter + 1):
-        res = gray_level_residual(X, quad, images, cams, normalisation, "extrinsic", extra_mask)
-        if abs(previous - res.std_percent) <= residual_rtol * res.std_percent:
-            converged = True
+        std = res.std_percent
+        if not np.isfinite(std):
+            logger.warning("calibration: no integration point is seen by both cameras")
             break
-        previous = res.std_percent
         D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
         G = _parameter_gradients(res, D)
         w = np.where(res.mask, quad.weight_mm2, 0.0)
         M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
-        dp = truncated_solve(M, -(G.T @ (w * res.r)), rcond, frozen)
-        before = cams
-        if stereo is None:
-            cams = [c.with_extrinsics(c.extrinsics + dp[6 * k:6 * k + 6]) for k, c in enumerate(cams)]
-        else:
-            cam0 = cams[0].with_extrinsics(cams[0].extrinsics + dp)
-            cams = [cam0, place_camera1(cam0, cams[1], *stereo)]
+        rhs = -(G.T @ (w * res.r))
+        for _ in range(max_damping + 1):                   # Levenberg-Marquardt guard
+            dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
+            trial_cams = moved(dp)
+            trial = evaluate(trial_cams)
+            if trial.std_percent <= std:                   # the residual did not grow
+                break
+            mu = max(10.0 * mu, 1e-4)
+        else:                                  # no damped step lowers the residual: p stagnant
+            converged = True
+            logger.debug("calibration it %d: no damped step lowers the residual (%.4f%%)", it, std)
+            break
+        before, cams, res = cams, trial_cams, trial
+        mu = mu / 10.0 if mu > 1e-8 else 0.0
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
         shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
@@ -106,11 +127,11 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         if log is not None:
             log.add(**(context or {}), stage="calibration", iteration=it,
                     residual_percent=res.std_percent, step=max(rot, tra), shift_px=shift,
-                    n_points=int(res.mask.sum()))
-        logger.debug("calibration it %d: residual %.4f%%, |drot| %.2e rad, |dt| %.2e mm, "
-                     "points moved %.2e px", it, res.std_percent, rot, tra, shift)
-        if rot < tol_rad and tra < tol_mm:
-            converged = True
+                    damping=mu, n_points=int(res.mask.sum()))
+        logger.debug("calibration it %d: residual %.4f%% -> %.4f%%, |drot| %.2e rad, |dt| %.2e mm, "
+                     "points moved %.2e px", it, std, res.std_percent, rot, tra, shift)
+        if (rot < tol_rad and tra < tol_mm) or std - res.std_percent <= residual_rtol * std:
+            converged = True                   # p stagnates (or, secondary, the residual does)
             break
-    res = gray_level_residual(X, quad, images, cams, normalisation, None, extra_mask)
-    return CalibrationResult(cameras=tuple(cams), residual=res, iterations=it, converged=converged)
+    return CalibrationResult(cameras=tuple(cams), residual=dataclasses.replace(res, dr_dp=None),
+                             iterations=it, converged=converged)

@@ -10,6 +10,11 @@ For each image scale ``s``, coarse to fine (the solution of scale ``s`` starts s
 
 Scale ``s`` uses the images aggregated ``s`` times (2x2 pixel means) and the matching
 cameras; the step solver is told ``s`` so that it can regularize accordingly.
+
+A measurement is trusted only if, at the finest scale, the gray-level residual is
+consistent with the images' own noise (:mod:`fesdic_core.noise`), the shape stayed
+bounded and the fixed point stagnated; otherwise :attr:`Measurement.failure` says what
+failed and by how much, and :func:`measure` does not call it converged.
 """
 from __future__ import annotations
 
@@ -19,16 +24,15 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
-from tqdm.auto import tqdm
-
 from .calibration import calibrate_extrinsics
 from .gauge import pose_directions, tangential_motions, transfer_rigid_part
 from .image import Image, pyramid
 from .mesh import SurfaceMesh, node_normals, validate_mesh
+from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import PixelQuadrature, pixel_quadrature
 from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
 from .rig import stereo_transform
-from .shape import DivergenceError, GaussNewtonLog, current_nodes, shape_gauss_newton
+from .shape import GaussNewtonLog, current_nodes, shape_gauss_newton
 from .solvers import DirectSolver, StepSolver
 
 logger = logging.getLogger(__name__)
@@ -44,10 +48,15 @@ class MeasurementSettings:
         multiplied by 2**s (a coarse pixel is 2**s fine pixels).
     fixed_point_tol_px : stagnation of the poses: largest shift of the projected nodes
         between two fixed-point iterations, in pixels of the current scale.
-    fixed_point_rtol : the fixed point also stops when the residual changes by less
-        than this fraction between two iterations.
+    fixed_point_rtol : at a coarse scale (not the finest), the fixed point also hands over
+        to the next scale when the residual falls by less than this fraction in an
+        iteration; that scale is then reported as not stagnated.
     keep_stereo : when calibrating, keep the stereo relation of the initial cameras
         (6 unknowns) instead of freeing both cameras (12 unknowns).
+    consistency_factor : the final residual may be at most this many times the noise
+        floor of the images (:data:`fesdic_core.noise.CONSISTENCY_FACTOR`).
+    max_shape_fraction : the correction may reach at most this fraction of the mesh's
+        diagonal; a larger one is a diverged measurement.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -61,7 +70,8 @@ class MeasurementSettings:
     fixed_point_tol_px: float = 1e-2
     fixed_point_rtol: float = 1e-4
     points_per_px: float = 1.0
-    progress: bool = False
+    consistency_factor: float = CONSISTENCY_FACTOR
+    max_shape_fraction: float = 0.1
 
     def __post_init__(self):
         if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
@@ -73,11 +83,36 @@ class MeasurementSettings:
 
 
 @dataclass(frozen=True)
+class ScaleReport:
+    """How one image scale ended.
+
+    ``shape_converged``: the last shape Gauss-Newton stagnated (q); ``fixed_point_converged``:
+    the fixed point stagnated (p and q; True when not calibrating); ``noise_percent``: the
+    residual the images' noise explains at this scale (:mod:`fesdic_core.noise`).
+    """
+
+    scale: int
+    residual_percent: float
+    noise_percent: float
+    fixed_point_iterations: int
+    shape_converged: bool
+    fixed_point_converged: bool
+    n_points: int
+
+    @property
+    def converged(self) -> bool:
+        return self.shape_converged and self.fixed_point_converged
+
+
+@dataclass(frozen=True)
 class Measurement:
     """Result of a shape measurement (world coordinates of the final cameras, mm).
 
-    ``converged``: at the finest scale, the last shape Gauss-Newton stagnated and, when
-    calibrating, so did the fixed point (coarse scales only start the next one, Remark 3).
+    ``failure``: None for a trusted measurement, else one line saying what failed and by
+    how much (residual against the noise floor, an unbounded shape, no stagnation at the
+    finest scale). ``converged``: no failure and every scale stagnated (a coarse scale
+    that stopped on its iteration limit only starts the next one, Remark 3, but is
+    reported here). ``scales``: one :class:`ScaleReport` per scale, coarse to fine.
     """
 
     q: np.ndarray
@@ -90,10 +125,26 @@ class Measurement:
     iterations: int = 0
     time_s: float = 0.0
     converged: bool = True
+    noise_percent: float = float("nan")
+    failure: str | None = None
+    scales: tuple = ()
 
     @property
     def residual_percent(self) -> float:
         return self.residual.std_percent
+
+    @property
+    def ok(self) -> bool:
+        """True when the measurement can be trusted (``failure`` is None)."""
+        return self.failure is None
+
+
+class MeasurementFailedError(RuntimeError):
+    """A measurement that cannot be trusted; ``measurement`` holds it (``failure`` says why)."""
+
+    def __init__(self, measurement: Measurement):
+        super().__init__(measurement.failure)
+        self.measurement = measurement
 
 
 class MeasurementInputError(ValueError):
@@ -151,10 +202,58 @@ def _projected_shift_px(cameras_a, X_a: np.ndarray, cameras_b, X_b: np.ndarray) 
                for a, b in zip(cameras_a, cameras_b))
 
 
+def check_scales(images: Sequence[Image], scales: Sequence[int], min_px: int = 32) -> None:
+    """Raise :class:`MeasurementInputError` if the coarsest scale leaves too small an image."""
+    h, w = images[0].shape
+    s = max(scales)
+    if min(h, w) >> s < min_px:
+        raise MeasurementInputError(
+            f"image scale {s} is too coarse for {images[0].source} ({w} x {h} px): "
+            f"{w >> s} x {h >> s} px after {s} halvings, at least {min_px} px a side are needed; "
+            f"use at most {max(0, int(np.log2(min(h, w) / min_px)))} coarse scales")
+
+
+def check_texture(X: np.ndarray, mask: np.ndarray, images: Sequence[Image], cameras: Sequence) -> None:
+    """Raise :class:`MeasurementInputError` if an image shows no texture above its noise
+    over the region the points ``X`` cover (full-resolution images and cameras)."""
+    floor = residual_noise_floor(X, mask, images, cameras)
+    for image, ratio, contrast, sigma in zip(images, floor.texture_ratio(), floor.contrast,
+                                             floor.sigma_gray):
+        if not ratio >= MIN_TEXTURE_RATIO:
+            raise MeasurementInputError(
+                f"{image.source}: no texture to correlate over the specimen: contrast "
+                f"{contrast:.3g} gray levels against noise {sigma:.3g} (ratio {ratio:.3g}, at least "
+                f"{MIN_TEXTURE_RATIO:g} needed): a uniform or pure-noise image, or the wrong image")
+
+
+def judge(residual_percent: float, noise_percent: float, q: np.ndarray, nodes: np.ndarray,
+          finest: ScaleReport, settings: MeasurementSettings) -> str | None:
+    """Why a measurement cannot be trusted, or None (see the module docstring)."""
+    if not np.isfinite(residual_percent):
+        return "no integration point is seen by both cameras at the finest scale"
+    size = float(np.linalg.norm(np.ptp(nodes, axis=0)))
+    largest = float(np.max(np.abs(q))) if q.size else 0.0
+    if not np.isfinite(largest) or largest > settings.max_shape_fraction * size:
+        return (f"the shape diverged: a correction of {largest:.3g} mm, more than "
+                f"{settings.max_shape_fraction:g} of the mesh size ({size:.3g} mm)")
+    ratio = residual_percent / noise_percent if noise_percent > 0 else np.inf
+    if not ratio <= settings.consistency_factor:
+        return (f"the residual {residual_percent:.3g}% is {ratio:.3g} times the {noise_percent:.3g}% "
+                f"that the image noise explains (at most {settings.consistency_factor:g}): the "
+                "images do not match the surface and cameras (wrong or swapped cameras, wrong "
+                "poses or specimen, or a wrong minimum)")
+    if not finest.converged:
+        what = "shape Gauss-Newton" if not finest.shape_converged else "fixed point"
+        return (f"the {what} did not stagnate at the finest scale (scale {finest.scale}) "
+                "within its iteration limit")
+    return None
+
+
 def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             solver: StepSolver | None = None, settings: MeasurementSettings = MeasurementSettings(),
             q0: np.ndarray | None = None, normals: np.ndarray | None = None,
-            visibility: Callable[[np.ndarray, Sequence], np.ndarray] | None = None) -> Measurement:
+            visibility: Callable[[np.ndarray, Sequence], np.ndarray] | None = None,
+            progress: Callable[[int, int, ScaleReport], None] | None = None) -> Measurement:
     """Measure the shape correction of ``mesh`` from a stereo pair.
 
     Parameters
@@ -168,13 +267,16 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     normals : nominal node normals (default :func:`node_normals`)
     visibility : optional ``f(X (g,3), cameras) -> bool (g,)``, points to keep (e.g. faces
         hidden from one camera are masked, not fitted)
+    progress : optional ``f(k, n, report)`` called after scale ``k`` of ``n`` (1-based)
 
-    Raises
-    ------
-    DivergenceError
-        If a Gauss-Newton diverged; ``err.best`` is the best Measurement reached.
+    Returns
+    -------
+    Measurement
+        Always returned when the inputs fit; check :attr:`Measurement.failure` (or
+        :attr:`Measurement.ok`) before trusting it.
     """
     check_inputs(mesh, images, cameras)
+    check_scales(images, settings.scales)
     solver = DirectSolver() if solver is None else solver
     normals = node_normals(mesh) if normals is None else normals
     q = np.zeros(mesh.nodes.shape[0]) if q0 is None else np.asarray(q0, float).copy()
@@ -183,22 +285,26 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
     log = GaussNewtonLog()
     t0 = time.perf_counter()
-    total_iterations = 0
+    total_iterations, reports = 0, []
     result = None
-    bar = tqdm(settings.scales, desc="scales", disable=not settings.progress, leave=False)
-    for scale in bar:
+    for k, scale in enumerate(settings.scales, start=1):
         imgs = [p[scale] for p in pyramids]
         scaled = [c.scaled(scale) for c in cams]
         nodes_now = current_nodes(mesh.nodes, normals, q)
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
         node_weights = quad.to_nodes(quad.weight_mm2)
-        slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
+        if settings.calibrate:
+            slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         X_now = quad.points(nodes_now)
         mask = None if visibility is None else visibility(X_now, scaled)
-        _report_coverage(quad, gray_level_residual(X_now, quad, imgs, scaled,
-                                                   settings.normalisation, None, mask), scale)
+        first = gray_level_residual(X_now, quad, imgs, scaled, settings.normalisation, None, mask)
+        _report_coverage(quad, first, scale)
+        if k == 1:
+            check_texture(X_now, first.mask, images, cams)
+        noise = residual_noise_floor(X_now, first.mask, imgs, scaled)
         coarse = 2.0 ** scale
-        previous_residual, converged_now = np.inf, True
+        finest = scale == settings.scales[-1]
+        fixed_point_converged, previous_residual = not settings.calibrate, np.inf
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -219,13 +325,6 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             q = shape.q
             total_iterations += shape.iterations
             result = (shape.residual, quad)
-            if shape.diverged:
-                best = _build(mesh, normals, q, cams, result, log, total_iterations, t0, False)
-                raise DivergenceError(
-                    f"shape Gauss-Newton diverged at scale {scale} (fixed point {fp}): the residual "
-                    f"grew for several iterations; best residual {shape.residual.std_percent:.3f}% kept",
-                    best=best)
-            converged_now = shape.converged
             if not settings.calibrate:
                 break
             q, cams = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
@@ -236,25 +335,38 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                                      current_nodes(mesh.nodes, normals, q_before), scaled, X_nodes)
             logger.info("scale %d fixed point %d: residual %.3f%%, max|dq| %.2e mm, pose shift %.2e px",
                         scale, fp, shape.residual.std_percent, dq, dp)
-            residual = shape.residual.std_percent
-            stagnant = abs(previous_residual - residual) <= settings.fixed_point_rtol * residual
-            previous_residual = residual
-            if (dq < settings.fixed_point_tol_mm * coarse and dp < settings.fixed_point_tol_px) or stagnant:
+            if dq < settings.fixed_point_tol_mm * coarse and dp < settings.fixed_point_tol_px:
+                fixed_point_converged = True                     # p and q stagnate (section 2.2)
                 break
-        else:
-            if settings.calibrate:
-                converged_now = False
-                # a coarse scale only starts the next one (Remark 3): said, not warned
-                logger.log(logging.WARNING if scale == settings.scales[-1] else logging.INFO,
-                           "fixed point did not stagnate at scale %d within %d iterations",
-                           scale, settings.max_fixed_point)
-        bar.set_postfix(residual=f"{result[0].std_percent:.2f}%")
-    return _build(mesh, normals, q, cams, result, log, total_iterations, t0, converged_now)
-
-
-def _build(mesh, normals, q, cams, result, log, iterations, t0, converged) -> Measurement:
+            residual = shape.residual.std_percent
+            if not finest and previous_residual - residual <= settings.fixed_point_rtol * residual:
+                logger.info("scale %d: the residual stagnates; the next scale goes on", scale)
+                break                     # a coarse scale only starts the next one (Remark 3)
+            previous_residual = residual
+        report = ScaleReport(scale=scale, residual_percent=shape.residual.std_percent,
+                             noise_percent=noise.percent, fixed_point_iterations=fp,
+                             shape_converged=shape.converged,
+                             fixed_point_converged=fixed_point_converged,
+                             n_points=int(shape.residual.mask.sum()))
+        reports.append(report)
+        if not report.converged:
+            # a coarse scale only starts the next one (Remark 3): said, not warned
+            logger.log(logging.WARNING if scale == settings.scales[-1] else logging.INFO,
+                       "scale %d: the %s did not stagnate within its iteration limit", scale,
+                       "shape Gauss-Newton" if not shape.converged else "fixed point")
+        logger.info("scale %d: residual %.3f%% (noise floor %.3f%%)", scale,
+                    report.residual_percent, report.noise_percent)
+        if progress is not None:
+            progress(k, len(settings.scales), report)
+    failure = judge(reports[-1].residual_percent, reports[-1].noise_percent, q, mesh.nodes,
+                    reports[-1], settings)
+    if failure is not None:
+        logger.warning("measurement failed: %s", failure)
     residual, quad = result
     return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
                        cameras=tuple(cams), residual=residual, quadrature=quad,
-                       history=tuple(log.records), iterations=iterations,
-                       time_s=time.perf_counter() - t0, converged=bool(converged))
+                       history=tuple(log.records), iterations=total_iterations,
+                       time_s=time.perf_counter() - t0,
+                       converged=failure is None and all(r.converged for r in reports),
+                       noise_percent=reports[-1].noise_percent, failure=failure,
+                       scales=tuple(reports))

@@ -11,6 +11,7 @@ and each step ``d`` comes from the :class:`~fesdic_core.solvers.StepSolver` hook
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -28,14 +29,6 @@ from .solvers import StepSolver
 logger = logging.getLogger(__name__)
 
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
-
-
-class DivergenceError(RuntimeError):
-    """Gauss-Newton diverged; ``best`` holds the best state reached (lowest residual)."""
-
-    def __init__(self, message: str, best=None):
-        super().__init__(message)
-        self.best = best
 
 
 def current_nodes(nodes0: np.ndarray, normals: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -87,64 +80,81 @@ class GaussNewtonLog:
 
 @dataclass(frozen=True)
 class ShapeResult:
+    """End of a shape Gauss-Newton.
+
+    ``converged``: q stagnated (the last accepted step below the tolerance, or no damped
+    step lowers the residual any more); False when the iteration limit stopped it.
+    ``damping``: the Levenberg-Marquardt factor in force at the end (0: plain Gauss-Newton).
+    """
+
     q: np.ndarray
     residual: GrayLevelResidual
     iterations: int
     converged: bool
-    diverged: bool
+    damping: float = 0.0
+
+
+def damped(H: sps.spmatrix, mu: float) -> sps.spmatrix:
+    """Levenberg-Marquardt matrix ``H + mu diag(H)`` (Marquardt's scaling; ``mu = 0``: H)."""
+    if mu == 0.0:
+        return H
+    return (H + mu * sps.diags(H.diagonal())).tocsr()
 
 
 def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
-                       max_iter: int = 20, tol_mm: float = 1e-4, divergence_window: int = 3,
-                       divergence_rtol: float = 1e-3, residual_rtol: float = 1e-4,
+                       max_iter: int = 20, tol_mm: float = 1e-4, max_damping: int = 8,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
                        on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
-    Stops when ``max |d| < tol_mm`` (q stagnates) or when the residual decreased by less
-    than ``residual_rtol`` (relative) over the last step. If the residual grows (by more than
-    ``divergence_rtol``, relative) for ``divergence_window`` consecutive iterations, stops
-    and returns the best state with ``diverged=True``.
+    Each step solves ``(H + mu diag H) d = b`` through the hook (Levenberg-Marquardt;
+    ``mu = 0``, the plain Gauss-Newton step of Eq. 8, whenever that lowers the residual).
+    A step that raises the residual is refused and retried with ``mu`` ten times larger
+    (at most ``max_damping`` times); after an accepted step ``mu`` shrinks tenfold, so the
+    residual never grows. Convergence is the stagnation of q (section 2.2): the accepted
+    step is below ``tol_mm`` (mm, largest node), or no damped step lowers the residual any
+    more. ``max_iter`` reached first leaves ``converged=False``.
     """
-    q = q0.copy()
-    best_q, best_res, best_std = q.copy(), None, np.inf
-    rising, converged, diverged, it = 0, False, False, 0
-    previous = np.inf
-    for it in range(1, max_iter + 1):
+    def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
-        res = gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
+        return gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
+
+    q = np.asarray(q0, float).copy()
+    res = evaluate(q)
+    mu, converged, it = 0.0, False, 0
+    for it in range(1, max_iter + 1):
         std = res.std_percent
-        if std < best_std:
-            best_q, best_res, best_std = q.copy(), res, std
-        rising = rising + 1 if std > previous * (1.0 + divergence_rtol) else 0
-        if it > 1 and abs(previous - std) <= residual_rtol * std:
-            converged = True                                          # the residual stagnates
-            previous = std
-            break
-        previous = std
-        if rising >= divergence_window:
-            diverged = True
-            logger.warning("shape Gauss-Newton diverged at scale %d (residual grew %d times); "
-                           "keeping the best state (%.3f%%)", scale, rising, best_std)
+        if not np.isfinite(std):                     # no point seen: nothing to measure
+            logger.warning("shape GN scale %d: no integration point is seen by both cameras", scale)
             break
         H, b = shape_operators(quad, normals, res)
-        d = solver.solve(H, b, q, scale)
-        q = q + d
+        for _ in range(max_damping + 1):
+            d = solver.solve(damped(H, mu), b, q, scale)
+            trial = evaluate(q + d) if np.all(np.isfinite(d)) else None
+            if trial is not None and trial.std_percent <= std:        # the residual did not grow
+                break
+            mu = max(10.0 * mu, 1e-4)
+        else:                               # no damped step lowers the residual: q is stagnant
+            converged = True
+            logger.debug("shape GN scale %d it %d: no damped step lowers the residual (%.4f%%); "
+                         "stagnant", scale, it, std)
+            break
+        q, res = q + d, trial
         step = float(np.max(np.abs(d))) if d.size else 0.0
         if log is not None:
             log.add(**(context or {}), scale=scale, stage="shape", iteration=it,
-                    residual_percent=std, step=step, n_points=int(res.mask.sum()))
+                    residual_percent=res.std_percent, step=step, damping=mu,
+                    n_points=int(res.mask.sum()))
         if on_iteration is not None:
-            on_iteration(it, std)
-        logger.debug("shape GN scale %d it %d: residual %.4f%%, max|d| %.2e mm", scale, it, std, step)
+            on_iteration(it, res.std_percent)
+        logger.debug("shape GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, mu %.1e",
+                     scale, it, std, res.std_percent, step, mu)
+        mu = mu / 10.0 if mu > 1e-8 else 0.0
         if step < tol_mm:
             converged = True
             break
-    X = quad.points(current_nodes(nodes0, normals, q))
-    res = gray_level_residual(X, quad, images, cameras, normalisation, None, extra_mask)
-    if diverged or res.std_percent > best_std:
-        q, res = best_q, best_res
-    return ShapeResult(q=q, residual=res, iterations=it, converged=converged, diverged=diverged)
+    return ShapeResult(q=q, residual=dataclasses.replace(res, dr_dX=None), iterations=it,
+                       converged=converged, damping=mu)

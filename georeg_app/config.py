@@ -13,10 +13,13 @@ A complete example (every key; optional keys show their default in parentheses):
     cam0 = "images/left.tif"
     cam1 = "images/right.tif"
 
-    [cameras]                     # required: exactly one of `file` or `pyvale_csv`
+    [cameras]                     # required: exactly one of file, pyvale_csv, opencv, vic3d, dice
     file = "cameras.json"         # the core's JSON camera file (intrinsics + poses)
-    # pyvale_csv = "calib.csv"    # a pyvale stereo calibration CSV (cam0 at the origin);
-                                  # the specimen pose then comes from >= 4 landmarks:
+    # pyvale_csv = "calib.csv"    # a pyvale stereo calibration CSV (cam0 at the origin)
+    # opencv = "stereo.yml"       # OpenCV FileStorage (.yml/.xml/.json): K1 D1 K2 D2 R T
+    # vic3d = "project.z3d"       # VIC-3D project (.z3d zip or its project.xml)
+    # dice = "cal.xml"            # DICe camera-system XML
+                                  # all but `file`: the specimen pose comes from >= 4 landmarks:
     # [[landmarks]]               # one table per landmark (also accepted: [[cameras.landmarks]])
     # xyz_mm = [-50.0, -25.0, 0.0]   # world point on the specimen (mm)
     # cam0_px = [812.3, 1040.8]      # where camera 0 sees it (x = column, y = row, px)
@@ -91,13 +94,25 @@ class Landmark:
     cam1_px: np.ndarray
 
 
+CAMERA_SOURCES = ("file", "pyvale_csv", "opencv", "vic3d", "dice")
+
+
 @dataclass(frozen=True)
 class CamerasConfig:
-    """Exactly one of ``file`` (JSON cameras) or ``pyvale_csv`` (+ >= 4 landmarks)."""
+    """Exactly one camera source: ``file`` (JSON cameras) or a calibration of another tool
+    (``pyvale_csv``, ``opencv``, ``vic3d``, ``dice``, each + >= 4 landmarks)."""
 
     file: Path | None = None
     pyvale_csv: Path | None = None
     landmarks: tuple[Landmark, ...] = ()
+    opencv: Path | None = None
+    vic3d: Path | None = None
+    dice: Path | None = None
+
+    @property
+    def source(self) -> str:
+        """The key of the camera source given (one of :data:`CAMERA_SOURCES`)."""
+        return next(k for k in CAMERA_SOURCES if getattr(self, k) is not None)
 
 
 @dataclass(frozen=True)
@@ -283,22 +298,23 @@ def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
 
 def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
     t = _Table(data, "[cameras]", source)
-    file = t.take("file", _string, "a file path (string)")
-    csv = t.take("pyvale_csv", _string, "a file path (string)")
+    paths = {key: t.take(key, _string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
     t.finish()
-    if (file is None) == (csv is None):
-        raise t.error(None, "give exactly one of `file` (JSON cameras) or `pyvale_csv`")
+    given = [key for key, value in paths.items() if value is not None]
+    if len(given) != 1:
+        raise t.error(None, f"give exactly one of {', '.join(f'`{k}`' for k in CAMERA_SOURCES)}, "
+                            f"got {len(given)}" + (f" ({', '.join(given)})" if given else ""))
     if nested is not None and top_landmarks is not None:
         raise t.error("landmarks", "given both as [[landmarks]] and [[cameras.landmarks]]; keep one")
     raw = nested if nested is not None else top_landmarks
     where = "[[cameras.landmarks]]" if nested is not None else "[[landmarks]]"
     landmarks = _landmarks(raw, where, source) if raw is not None else ()
-    if csv is not None and len(landmarks) < 4:
-        raise t.error("pyvale_csv", f"needs at least 4 [[landmarks]] to place the specimen, "
-                                    f"got {len(landmarks)}")
-    return CamerasConfig(_existing_file(t, "file", file, base),
-                         _existing_file(t, "pyvale_csv", csv, base), landmarks)
+    if given[0] != "file" and len(landmarks) < 4:
+        raise t.error(given[0], f"needs at least 4 [[landmarks]] to place the specimen, "
+                                f"got {len(landmarks)}")
+    return CamerasConfig(landmarks=landmarks,
+                         **{key: _existing_file(t, key, value, base) for key, value in paths.items()})
 
 
 _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},

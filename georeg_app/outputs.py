@@ -15,7 +15,9 @@ of the output folder are left alone.
 
 Files of a run (:func:`write_all`): ``summary.json`` (schema of :func:`summary_dict`),
 one ``<label>.vtu`` per method, ``<label>_spline.json`` and ``<label>_spline.igs`` for
-each georeg method, ``convergence.csv``, the PNG figures and ``report.html``.
+each georeg method, ``convergence.csv``, the PNG figures and ``report.html``; the calibrated
+rig of each method as ``<label>_cameras.json`` (the core's JSON) and ``<label>_cameras.yml``
+(OpenCV FileStorage: K1 D1 K2 D2, the stereo R T, each camera's rvec tvec).
 """
 from __future__ import annotations
 
@@ -245,6 +247,9 @@ def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None 
     ``figures`` (name -> PNG bytes) defaults to :func:`georeg_app.figures.make_figures`.
     Returns the final paths.
     """
+    from fesdic_core.calibration_formats import write_opencv_stereo
+    from fesdic_core.rig import write_cameras_json
+
     from .figures import make_figures
     from .report import report_html
 
@@ -256,6 +261,10 @@ def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None 
             if result.spline is not None:
                 write_spline_outputs(w.path(f"{stem}_spline.json"), w.path(f"{stem}_spline.igs"),
                                      result)
+            rig = getattr(getattr(result, "measurement", None), "cameras", ())   # calibrated rig
+            if len(rig) == 2:                                  # (none for a failed method)
+                write_cameras_json(w.path(f"{stem}_cameras.json"), rig)
+                write_opencv_stereo(w.path(f"{stem}_cameras.yml"), rig)
         write_convergence_csv(w.path(CONVERGENCE_FILE), run)
         for name, png in figures.items():
             w.write_bytes(f"{name}.png", png)

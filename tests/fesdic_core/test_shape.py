@@ -5,7 +5,7 @@ from fesdic_core.mesh import node_normals, rectangle_mesh
 from fesdic_core.quadrature import pixel_quadrature
 from fesdic_core.render import true_normal_offset
 from fesdic_core.residual import gray_level_residual
-from fesdic_core.shape import current_nodes, shape_gauss_newton, shape_operators
+from fesdic_core.shape import GaussNewtonLog, current_nodes, shape_gauss_newton, shape_operators
 from fesdic_core.solvers import DirectSolver, StepSolver
 
 
@@ -49,7 +49,7 @@ def test_twisted_plate_with_exact_cameras(twisted_scene, family, nx, ny):
                                 DirectSolver())
     truth = true_normal_offset(specimen, mesh.nodes, normals)
     rms = np.sqrt(np.mean((result.q - truth) ** 2))
-    assert result.converged and not result.diverged
+    assert result.converged
     assert rms < 0.02 * np.abs(truth).max(), f"RMS error {rms:.4f} mm"
 
 
@@ -71,17 +71,35 @@ def test_step_solver_hook_is_called_with_the_scale(twisted_scene):
     assert isinstance(solver, StepSolver)
     shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras, solver,
                        scale=2, max_iter=2)
-    assert solver.scales == [2, 2]
+    assert len(solver.scales) >= 2 and set(solver.scales) == {2}
 
 
-def test_divergence_stops_and_keeps_the_best_state(twisted_scene):
-    """A solver that steps the wrong way makes the residual grow: stop, keep the best q."""
+def test_a_step_the_wrong_way_is_refused_and_the_residual_never_grows(twisted_scene):
+    """A solver that steps the wrong way: every damped step raises the residual, so none
+    is taken; q stays at its start (the Levenberg-Marquardt guard, no divergence)."""
     _, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
     normals = node_normals(mesh)
     quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    solver = _RecordingSolver(factor=-1.0)
     result = shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras,
-                                _RecordingSolver(factor=-1.0), max_iter=10, divergence_window=3)
-    assert result.diverged and not result.converged
-    np.testing.assert_array_equal(result.q, 0.0)          # the start was the best state
-    assert result.iterations <= 5
+                                solver, max_iter=10, max_damping=4)
+    np.testing.assert_array_equal(result.q, 0.0)
+    assert result.iterations == 1 and len(solver.scales) == 5      # 1 + 4 damped retries
+
+
+def test_an_overshooting_step_is_damped_until_the_residual_falls(twisted_scene):
+    """Steps 2.5 times too long oscillate without damping; with it the residual falls
+    monotonically and q reaches the truth (twist of 0.5 mm at the corners)."""
+    specimen, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    log = GaussNewtonLog()
+    result = shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras,
+                                _RecordingSolver(factor=2.5), max_iter=40, log=log)
+    residuals = [r["residual_percent"] for r in log.records]
+    assert np.all(np.diff(residuals) <= 0.0), residuals
+    assert max(r["damping"] for r in log.records) > 0.0
+    truth = true_normal_offset(specimen, mesh.nodes, normals)
+    assert result.converged and np.sqrt(np.mean((result.q - truth) ** 2)) < 0.02, result.q

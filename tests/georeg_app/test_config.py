@@ -152,6 +152,34 @@ def test_pyvale_csv_with_landmarks(tmp_path):
         tmp_path, bad, files=files)
 
 
+@pytest.mark.parametrize("key, name", [("opencv", "stereo.yml"), ("vic3d", "project.z3d"),
+                                       ("dice", "cal.xml")])
+def test_calibrations_of_other_tools_need_landmarks(tmp_path, key, name):
+    marks = "".join(f"\n[[cameras.landmarks]]\nxyz_mm = [{k}.0, 1, 0]\ncam0_px = [1, 2]\ncam1_px = [3, {k}]\n"
+                    for k in range(4))
+    text = GOOD.replace('file = "cameras.json"', f'{key} = "{name}"') + marks
+    files = ("img/left.tif", "img/right.tif", name)
+    c = load_config(_write(tmp_path, text, files=files))
+    assert getattr(c.cameras, key) == tmp_path / name and c.cameras.file is None
+    assert c.cameras.source == key and len(c.cameras.landmarks) == 4
+    three = text[:text.rindex("[[cameras.landmarks]]")]
+    assert f"[cameras] {key}: needs at least 4 [[landmarks]]" in _error(tmp_path, three, files=files)
+    (tmp_path / "elsewhere").mkdir()
+    missing = _error(tmp_path / "elsewhere", text, ConfigFileNotFoundError, files=files[:2])
+    assert f"[cameras] {key}: file not found" in missing and name in missing
+
+
+@pytest.mark.parametrize("cameras, expected", [
+    ('file = "cameras.json"\nopencv = "stereo.yml"', "got 2 (file, opencv)"),
+    ('vic3d = "p.z3d"\ndice = "cal.xml"\npyvale_csv = "c.csv"', "got 3 (pyvale_csv, vic3d, dice)"),
+    ("", "got 0"),
+])
+def test_zero_or_several_camera_sources_are_named(tmp_path, cameras, expected):
+    message = _error(tmp_path, GOOD.replace('file = "cameras.json"', cameras))
+    assert "[cameras]: give exactly one of `file`, `pyvale_csv`, `opencv`, `vic3d`, `dice`" in message
+    assert expected in message
+
+
 def _documented_example(text: str) -> str:
     """The TOML example after 'A complete example' (indented block) of a docstring."""
     block = text.split("A complete example", 1)[1].split("::\n", 1)[1]
