@@ -67,21 +67,12 @@ def test_accepted_pairs_give_exact_nonsingular_levels(family, degree):
 
 # --- legacy meshes (a mesher's nodes, read with mesh_io) regularized by point inversion ----
 
-# driver.measure weighs the gauge with L^T w, <= 0 at T6 corners (see
-# tests/fesdic_core/test_element_families.py); passes once it uses mesh.nodal_areas
-_T6_NEEDS_DRIVER = pytest.mark.xfail(
-    strict=True, raises=ValueError,
-    reason="driver.py weighs the gauge with L^T w (<= 0 at T6 corners) instead of nodal_areas")
-
-
-@pytest.mark.parametrize("family,nx,ny", [("T3", 12, 8), ("Q4", 12, 8),
-                                          pytest.param("T6", 6, 4, marks=_T6_NEEDS_DRIVER)])
+@pytest.mark.parametrize("family,nx,ny", [("T3", 12, 8), ("Q4", 12, 8), ("T6", 6, 4)])
 def test_legacy_mesh_measures_through_point_inversion_and_the_georeg_solver(
         twisted_scene, tmp_path, family, nx, ny):
     """An irregular legacy mesh written and read back (gmsh), its nodes located on the
     nominal spline by point inversion, measured with the spline levels as step solver:
-    shape RMS < 2% of the 0.5 mm deviation (measured: T3 0.5 um, Q4 0.7 um; T6 0.6 um once
-    the driver weighs the gauge with nodal_areas)."""
+    shape RMS < 2% of the 0.5 mm deviation (measured: T3 0.5 um, Q4 0.7 um, T6 0.6 um)."""
     specimen, cameras, images = twisted_scene
     mesh = rectangle_mesh(L, W, nx, ny, family=family)
     inner = np.setdiff1d(np.arange(mesh.n_nodes), boundary_nodes(mesh))
