@@ -2,28 +2,34 @@
 
 ::
 
-    georeg demo    [--out DIR]              # embedded synthetic twisted open-hole specimen
-    georeg measure CONFIG.toml [--out DIR]  # the method of [method] on user data
-    georeg compare CONFIG.toml [--out DIR]  # FE, Tikhonov (each length), georeg multi/monoscale
+    georeg demo    [--out DIR] [--overwrite]              # embedded synthetic specimen
+    georeg measure CONFIG.toml [--out DIR] [--overwrite]  # the method of [method]
+    georeg compare CONFIG.toml [--out DIR] [--overwrite]  # FE, Tikhonov, georeg multi/monoscale
 
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
 tracebacks on error), ``--version``. An error prints one line ``georeg: error: <message>``
 on stderr and exits with status 1; nothing is written to the output folder then (all
 outputs are staged and published together, see :mod:`georeg_app.outputs`).
+
+A measurement that fails its own checks (the residual against the images' noise, an
+unbounded shape, no stagnation; :mod:`fesdic_core.driver`) is an error of ``measure``.
+``compare`` and ``demo`` mark a failed method in summary.json and the report and deliver
+the others; they exit with status 1 only when every method failed. The output folder is
+checked before any computing: it must be a new or empty folder, or ``--overwrite`` is
+needed (its previous contents are then replaced as a whole).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import logging
+import os
 import sys
 import time
 import traceback
 from importlib import metadata
 from pathlib import Path
 from typing import Sequence
-
-from fesdic_core.shape import DivergenceError
 
 from .config import Config, load_config
 
@@ -62,43 +68,71 @@ def build_parser() -> argparse.ArgumentParser:
                                        "compare all methods on it (no input needed)")
     demo.add_argument("--out", type=Path, default=Path(DEFAULT_DEMO_OUT),
                       help=f"output folder (default: {DEFAULT_DEMO_OUT})")
+    demo.add_argument("--overwrite", action="store_true",
+                      help="replace the contents of a non-empty output folder")
     for name, text in (("measure", "measure the shape with the method of the configuration"),
                        ("compare", "run all methods (FE, Tikhonov, georeg) on the same data")):
         p = sub.add_parser(name, help=text)
         p.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
         p.add_argument("--out", type=Path, default=None,
                        help="output folder (default: [output] dir of the configuration)")
+        p.add_argument("--overwrite", action="store_true",
+                       help="replace the contents of a non-empty output folder")
     for p in sub.choices.values():
         _common(p, suppress=True)
     return parser
 
 
-# loggers shown from this level only, unless --verbose
-_CHATTY = {"matplotlib": logging.INFO, "PIL": logging.INFO,
-           "fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+#: our packages: their loggers follow --quiet/--verbose (DEBUG under --verbose)
+_OURS = ("georeg_app", "fesdic_core", "georeg_plugin", "adapters", "__main__")
+#: our chatty loggers (e.g. staged file names), shown from this level only, unless --verbose
+_CHATTY = {"fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+#: third-party loggers known to flood DEBUG/INFO: kept at WARNING even under --verbose (the
+#: root logger is at WARNING too, so any other third-party logger is quiet as well)
+_THIRD_PARTY = ("matplotlib", "PIL", "numba", "pyxel", "urllib3", "asyncio", "distributed",
+                "fsspec", "h5py", "meshio", "numexpr", "tornado", "bokeh", "dask")
+
+
+def progress_enabled(quiet: bool) -> bool:
+    """Progress bars only when not --quiet and stderr is a terminal (no bars in log files)."""
+    if quiet:
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):        # replaced or closed stderr
+        return False
+
+
+def _log_levels(quiet: bool, verbose: bool) -> dict[str, int]:
+    """Level of each logger we set: root and third parties at WARNING, ours at the level
+    of --quiet/--verbose (our chatty ones no lower than their floor unless --verbose)."""
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
+    levels = {"": logging.WARNING, **{name: logging.WARNING for name in _THIRD_PARTY}}
+    levels.update({name: level for name in _OURS})
+    if not verbose:
+        levels.update({name: max(level, floor) for name, floor in _CHATTY.items()})
+    return levels
 
 
 @contextlib.contextmanager
 def _logging_to_stderr(quiet: bool, verbose: bool):
-    """Log to stderr at the level of --quiet/--verbose for the duration of a command."""
-    level = logging.WARNING if quiet else (logging.DEBUG if verbose else logging.INFO)
-    root, quiet_loggers = logging.getLogger(), tuple(_CHATTY)
-    saved = root.level, [logging.getLogger(n).level for n in quiet_loggers]
+    """Log to stderr at the level of --quiet/--verbose for the duration of a command:
+    our loggers at WARNING/INFO/DEBUG, third-party loggers at WARNING in every case."""
+    levels = _log_levels(quiet, verbose)
+    saved = {name: logging.getLogger(name or None).level for name in levels}
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s" if verbose
                                            else f"{PROG}: %(message)s"))
+    root = logging.getLogger()
     root.addHandler(handler)
-    root.setLevel(level)
-    if not verbose:                       # chatter (e.g. staged file names) stays out of the way
-        for name, floor in _CHATTY.items():
-            logging.getLogger(name).setLevel(max(level, floor))
+    for name, lvl in levels.items():
+        logging.getLogger(name or None).setLevel(lvl)
     try:
         yield
     finally:
         root.removeHandler(handler)
-        root.setLevel(saved[0])
-        for name, lvl in zip(quiet_loggers, saved[1]):
-            logging.getLogger(name).setLevel(lvl)
+        for name, lvl in saved.items():
+            logging.getLogger(name or None).setLevel(lvl)
 
 
 def measure_specs(config: Config) -> list:
@@ -114,30 +148,57 @@ def measure_specs(config: Config) -> list:
     return [MethodSpec(m.name, None, scales, label)]
 
 
+class MeasurementFailed(RuntimeError):
+    """The run finished but its measurement(s) cannot be trusted (the message says why)."""
+
+
+def check_output_folder(out: Path, overwrite: bool) -> None:
+    """Refuse, before any computing, an output folder that cannot or must not be written."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"output folder {out} exists and is not a folder")
+    parent = out.resolve().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent if not out.exists() else out.resolve().parent, os.W_OK | os.X_OK):
+        raise PermissionError(f"output folder {out}: {parent} is not writable")
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise FileExistsError(f"output folder {out} is not empty; choose another folder or "
+                              "use --overwrite to replace its contents")
+
+
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
+    out = args.out if (config is None or args.out is not None) else config.output.dir
+    check_output_folder(out, args.overwrite)                                  # before computing
     from .outputs import REPORT_FILE, summary_dict, write_all
     from .pipeline import default_specs, demo_config, run_methods
 
-    progress = not args.quiet
+    progress = not args.quiet and sys.stderr.isatty()
     images = truth = None
     if config is None:
-        out = args.out
         config, images, truth = demo_config(out)
         specs = default_specs(config)
     else:
-        out = args.out if args.out is not None else config.output.dir
         config = config.with_output_dir(out)
         specs = default_specs(config) if args.command == "compare" else measure_specs(config)
     logger.info("%s: %d method(s): %s", args.command, len(specs), ", ".join(s.label for s in specs))
     run = run_methods(config, specs, images=images, truth=truth, progress=progress)
-    for m in summary_dict(run)["methods"]:
-        error = "n/a" if m["shape_rms_error_mm"] is None else f"{m['shape_rms_error_mm']:.4f} mm"
-        logger.info("%-24s residual %.3f%%, RMS dist. to BFP %.4f mm, error vs truth %s, "
-                    "%d iterations, %.1f s", m["label"], m["residual_percent"],
-                    m["distance_to_bfp_rms_mm"], error, m["iterations"], m["time_s"])
-    write_all(out, run)
+    summary = summary_dict(run)
+    for m in summary["methods"]:
+        if m["status"] != "ok":
+            logger.warning("%-24s FAILED: %s", m["label"], m["failure"])
+            continue
+        error = "n/a" if m["shape_rms_error_mm"] is None else f"{m['shape_rms_error_mm'] * 1e3:.2f} um"
+        noise = "n/a" if m["noise_percent"] is None else f"{m['noise_percent']:.3f}%"
+        logger.info("%-24s residual %.3f%% (noise floor %s), RMS dist. to BFP %.4f mm, "
+                    "error vs truth %s, %d iterations, %.1f s", m["label"], m["residual_percent"],
+                    noise, m["distance_to_bfp_rms_mm"], error, m["iterations"], m["time_s"])
+    failed = [m for m in summary["methods"] if m["status"] != "ok"]
+    if failed and (args.command == "measure" or len(failed) == len(summary["methods"])):
+        raise MeasurementFailed("; ".join(f"{m['label']} failed: {m['failure']}" for m in failed))
+    write_all(out, run, overwrite=args.overwrite)
     return Path(out) / REPORT_FILE
 
 
@@ -152,7 +213,7 @@ def _error_line(err: BaseException) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``georeg``; returns the exit status (0 ok, 1 error, 130 interrupted)."""
     args = build_parser().parse_args(argv)
-    expected = (ValueError, OSError, RuntimeError, DivergenceError)
+    expected = (ValueError, OSError, RuntimeError, ArithmeticError)
     with _logging_to_stderr(args.quiet, args.verbose):
         t0 = time.perf_counter()
         try:

@@ -83,8 +83,9 @@ class OutputWriter:
     nothing is written to ``out_dir`` (see the module docstring).
     """
 
-    def __init__(self, out_dir: str | os.PathLike):
+    def __init__(self, out_dir: str | os.PathLike, replace: bool = False):
         self.out_dir = Path(out_dir)
+        self.replace = replace
         self.staging: Path | None = None
         self.names: list[str] = []
         self.published: list[Path] = []
@@ -126,14 +127,27 @@ class OutputWriter:
         if exc_type is not None:
             logger.debug("run failed: staged outputs discarded, %s untouched", self.out_dir)
 
+    def _move_in(self, staging: Path) -> None:
+        os.chmod(staging, public_mode(directory=True))       # mkdtemp made it owner-only
+        os.replace(staging, self.out_dir)                    # the whole folder at once
+        staging.mkdir()                                      # (rmtree target of __exit__)
+
     def _publish(self, staging: Path) -> None:
         missing = [n for n in self.names if not (staging / n).is_file()]
         if missing:
             raise RuntimeError(f"outputs announced but not written: {', '.join(missing)}")
-        if not self.out_dir.exists():
-            os.chmod(staging, public_mode(directory=True))   # mkdtemp made it owner-only
-            os.replace(staging, self.out_dir)                # the whole folder at once
-            staging.mkdir()                                  # (rmtree target of __exit__)
+        if self.replace and self.out_dir.is_dir():           # the old folder goes as a whole
+            old = Path(tempfile.mkdtemp(dir=self.out_dir.parent, prefix=f".{self.out_dir.name}.old-"))
+            os.replace(self.out_dir, old / "previous")
+            try:
+                self._move_in(staging)
+            except BaseException:
+                os.replace(old / "previous", self.out_dir)   # put the old run back
+                raise
+            finally:
+                shutil.rmtree(old, ignore_errors=True)
+        elif not self.out_dir.exists():
+            self._move_in(staging)
         else:
             for name in self.names:
                 os.replace(staging / name, self.out_dir / name)
@@ -166,31 +180,57 @@ def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(values ** 2))) if values.size else float("nan")
 
 
+def _number(value) -> float | None:
+    return None if value is None or not np.isfinite(value) else float(value)
+
+
 def summary_dict(run) -> dict:
     """The ``summary.json`` document (issue 4; extend, do not change).
 
-    ``{"truth_available": bool, "methods": [{"name", "param", "shape_rms_error_mm",
-    "distance_to_bfp_rms_mm", "residual_percent", "iterations", "time_s", "mesh_file",
-    "label", "converged", "scales"}]}``; ``param`` and ``shape_rms_error_mm`` may be null.
+    ``{"truth_available": bool, "failed_methods": [label], "methods": [{"name", "param",
+    "shape_rms_error_mm", "distance_to_bfp_rms_mm", "residual_percent", "iterations",
+    "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
+    "noise_percent", "residual_to_noise", "scale_reports"}]}``. ``status`` is "ok" or
+    "failed" (``failure`` says why); a method that failed without any state has null
+    measurement fields and no mesh file.
     """
     methods = []
     for result, stem in zip(run.results, method_stems(run)):
         m, spec = result.measurement, result.spec
-        methods.append({
+        entry = {
             "name": str(spec.name),
             "param": None if spec.param is None else float(spec.param),
-            "shape_rms_error_mm": (None if result.shape_rms_error_mm is None
-                                   else float(result.shape_rms_error_mm)),
-            "distance_to_bfp_rms_mm": _rms(result.distance_to_bfp_mm),
-            "residual_percent": float(m.residual_percent),
-            "iterations": int(m.iterations),
-            "time_s": float(m.time_s),
-            "mesh_file": f"{stem}.vtu",
             "label": str(spec.label),
-            "converged": bool(m.converged),
             "scales": [int(s) for s in spec.scales],
-        })
-    return {"truth_available": bool(run.truth_available), "methods": methods}
+            "status": str(getattr(result, "status", "ok")),
+            "failure": getattr(result, "failure", None),
+            "shape_rms_error_mm": _number(result.shape_rms_error_mm),
+            "distance_to_bfp_rms_mm": None, "residual_percent": None, "noise_percent": None,
+            "residual_to_noise": None, "iterations": None, "time_s": None, "mesh_file": None,
+            "converged": False, "scale_reports": [],
+        }
+        if m is not None:
+            noise = getattr(m, "noise_percent", float("nan"))
+            entry.update({
+                "distance_to_bfp_rms_mm": _rms(result.distance_to_bfp_mm),
+                "residual_percent": float(m.residual_percent),
+                "noise_percent": _number(noise),
+                "residual_to_noise": _number(m.residual_percent / noise) if noise else None,
+                "iterations": int(m.iterations),
+                "time_s": float(m.time_s),
+                "mesh_file": f"{stem}.vtu",
+                "converged": bool(m.converged),
+                "scale_reports": [{"scale": r.scale, "residual_percent": _number(r.residual_percent),
+                                   "noise_percent": _number(r.noise_percent),
+                                   "fixed_point_iterations": r.fixed_point_iterations,
+                                   "shape_converged": r.shape_converged,
+                                   "fixed_point_converged": r.fixed_point_converged}
+                                  for r in getattr(m, "scales", ())],
+            })
+        methods.append(entry)
+    failed = [e["label"] for e in methods if e["status"] != "ok"]
+    return {"truth_available": bool(run.truth_available), "failed_methods": failed,
+            "methods": methods}
 
 
 def write_method_vtu(path: str | os.PathLike, result) -> Path:
@@ -199,8 +239,12 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     from fesdic_core.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
-    write_mesh(path, mesh, point_data={"shape_correction_mm": np.asarray(m.q, float),
-                                       "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)})
+    point_data = {"shape_correction_mm": np.asarray(m.q, float),
+                  "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)}
+    errors = getattr(result, "shape_error_mm", None)
+    if errors is not None:
+        point_data["shape_error_mm"] = np.asarray(errors, float)
+    write_mesh(path, mesh, point_data=point_data)
     return Path(path)
 
 
@@ -209,6 +253,8 @@ def convergence_rows(run) -> list[dict]:
     unit = float(run.one_fine_iteration_s)
     rows = []
     for result in run.results:
+        if result.measurement is None:
+            continue
         for record in result.measurement.history:
             t = float(record.get("time_s", float("nan")))
             rows.append({"method": result.spec.label, "scale": record.get("scale", ""),
@@ -241,8 +287,12 @@ def write_spline_outputs(json_path: str | os.PathLike, iges_path: str | os.PathL
     write_iges(iges_path, patch)
 
 
-def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None = None) -> list[Path]:
+def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None = None,
+              overwrite: bool = False) -> list[Path]:
     """Write every output of ``run`` into ``out_dir`` (all or nothing, see OutputWriter).
+
+    ``overwrite``: an existing ``out_dir`` is replaced as a whole (no file of an earlier
+    run stays mixed with the new ones); else the new files are added to it.
 
     ``figures`` (name -> PNG bytes) defaults to :func:`georeg_app.figures.make_figures`.
     Returns the final paths.
@@ -254,9 +304,11 @@ def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None 
     from .report import report_html
 
     figures = make_figures(run) if figures is None else figures
-    with OutputWriter(out_dir) as w:
+    with OutputWriter(out_dir, replace=overwrite) as w:
         w.write_json(SUMMARY_FILE, summary_dict(run))
         for result, stem in zip(run.results, method_stems(run)):
+            if result.measurement is None:                     # failed without a state
+                continue
             write_method_vtu(w.path(f"{stem}.vtu"), result)
             if result.spline is not None:
                 write_spline_outputs(w.path(f"{stem}_spline.json"), w.path(f"{stem}_spline.igs"),

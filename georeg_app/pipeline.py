@@ -9,6 +9,9 @@ Everything reaches the core through the adapters; the plugin never sees the core
 from __future__ import annotations
 
 import dataclasses
+import datetime
+import hashlib
+import importlib.metadata
 import logging
 import math
 import tempfile
@@ -16,13 +19,15 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from adapters.fesdic_core import NominalModel, georeg_solver, measured_spline, nominal_model
 from fesdic_core.accuracy import shape_error_to_surface
-from fesdic_core.driver import Measurement, MeasurementSettings, measure
+from fesdic_core.driver import (Measurement, MeasurementInputError, MeasurementSettings,
+                                measure)
 from fesdic_core.gauge import best_fit_plane_distance, move_cameras_with_specimen
 from fesdic_core.image import Image, read_image
-from fesdic_core.mesh import SurfaceMesh, validate_mesh
+from fesdic_core.mesh import MeshError, SurfaceMesh, validate_mesh
 from fesdic_core.mesh_io import read_mesh
 from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm_for, twisted_plate
 from fesdic_core.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
@@ -55,21 +60,39 @@ class MethodSpec:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class MethodResult:
+    """One method's outcome. ``status`` is "ok" or "failed"; a failed method says why in
+    ``failure`` and carries its (untrusted) measurement, or None if it gave no state at all.
+    ``shape_error_mm``: per-node distance to the true surface after the best rigid
+    alignment (None without a truth)."""
+
     spec: MethodSpec
-    measurement: Measurement
+    measurement: Measurement | None
     mesh: SurfaceMesh
-    distance_to_bfp_mm: np.ndarray
+    distance_to_bfp_mm: np.ndarray | None
     shape_rms_error_mm: float | None
     spline: SplinePatch | None = None
     spline_values: np.ndarray | None = None
+    status: str = "ok"
+    failure: str | None = None
+    shape_error_mm: np.ndarray | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunResult:
+    """All methods of a run, with what produced them (config, input checksums, version)."""
+
     results: tuple
     truth_available: bool
     images: tuple
     one_fine_iteration_s: float
+    config: Config | None = None
+    inputs: tuple = ()
+    version: str = "unknown"
+    started: str = ""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -118,6 +141,16 @@ def coarse_patch(geometry: GeometryConfig) -> SplinePatch:
     raise ValueError(f"[geometry] kind {geometry.kind!r} has no spline of its own")
 
 
+MIN_PX_PER_ELEMENT = 16     # pixels an FE element needs at full resolution (9 Q9 nodes)
+
+
+def _refinements(geometry: GeometryConfig, levels: int) -> int:
+    """Dyadic refinements from the coarsest spline to the FE mesh (see :func:`build_model`)."""
+    patch = coarse_patch(geometry)
+    target = geometry.elements or 1000
+    return max(levels - 1, math.ceil(math.log(target / np.prod(patch.n_elements), 4) - 1e-9))
+
+
 def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
     """Nominal spline and analysis-suitable Q9 mesh (Eq. 17), or a legacy mesh read from file.
 
@@ -134,10 +167,8 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
         size = hi - lo
         patch = rectangle(size[0], size[1], center=tuple((lo + hi)[:2] / 2))
         return NominalModel(patch=patch, mesh=mesh, uv=None)       # point inversion (Remark 6)
-    patch = coarse_patch(geometry)
-    target = geometry.elements or 1000
-    refinements = max(levels - 1, math.ceil(math.log(target / np.prod(patch.n_elements), 4) - 1e-9))
-    return nominal_model(patch, refinements, "Q9", name=geometry.kind)
+    return nominal_model(coarse_patch(geometry), _refinements(geometry, levels), "Q9",
+                         name=geometry.kind)
 
 
 # ----------------------------------------------------------------------------- methods
@@ -167,14 +198,108 @@ def _one_fine_iteration_s(results: Sequence[MethodResult]) -> float:
     """Median wall time of one shape iteration at scale 0 (Fig. 11's time unit)."""
     steps = []
     for r in results:
+        if r.measurement is None:
+            continue
         t = [h["time_s"] for h in r.measurement.history if h["scale"] == 0]
         steps += list(np.diff(t))
     return float(np.median(steps)) if steps else float("nan")
 
 
+def check_sizes(config: Config, images: Sequence[Image]) -> None:
+    """Refuse, before any computing, sizes that cannot work (named in the error).
+
+    The FE mesh (``[geometry] elements`` and ``[method] levels``, which refine the nominal
+    spline dyadically) must leave at least :data:`MIN_PX_PER_ELEMENT` pixels to each
+    element in the image, and the coarsest image scale at least 32 px a side.
+    """
+    h, w = images[0].shape
+    scales = config.method.scales
+    if min(h, w) >> (scales - 1) < 32:
+        raise ValueError(f"[method] scales = {scales}: the coarsest image would be "
+                         f"{w >> (scales - 1)} x {h >> (scales - 1)} px (at least 32 a side); "
+                         f"use at most {max(1, int(np.log2(min(h, w) / 32)) + 1)}")
+    if config.geometry.kind == "mesh":
+        return
+    levels = config.method.levels
+    coarse = int(np.prod(coarse_patch(config.geometry).n_elements))
+    asked = config.geometry.elements
+    if asked is not None and coarse * 4 ** (levels - 1) > 2 * asked:
+        raise ValueError(
+            f"[geometry] elements = {asked}: {levels} spline levels need an FE mesh of at least "
+            f"{coarse * 4 ** (levels - 1)} elements (each level halves the knot spans of the "
+            f"next); ask for more elements or fewer levels")
+    elements = coarse * 4 ** _refinements(config.geometry, levels)
+    if elements > (w * h) / MIN_PX_PER_ELEMENT:
+        largest = max(1, int(math.log((w * h) / MIN_PX_PER_ELEMENT / coarse, 4)) + 1)
+        raise ValueError(
+            f"[method] levels = {levels} with [geometry] elements = {config.geometry.elements}: "
+            f"the FE mesh would have {elements} elements, more than the {w} x {h} px images "
+            f"can measure (at least {MIN_PX_PER_ELEMENT} px an element); use at most "
+            f"{largest} levels")
+
+
+def _checksum(path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def input_files(config: Config) -> tuple:
+    """``(label, path, sha256)`` of each input file of ``config`` that exists on disk."""
+    entries = [("image cam0", config.images.cam0), ("image cam1", config.images.cam1)]
+    cams = config.cameras
+    for key in ("file", "pyvale_csv", "opencv", "vic3d", "dice"):
+        if getattr(cams, key, None) is not None:
+            entries.append((f"cameras ({key})", getattr(cams, key)))
+    if config.geometry.file is not None:
+        entries.append(("geometry", config.geometry.file))
+    if config.source is not None:
+        entries.append(("configuration", config.source))
+    return tuple((label, str(path), _checksum(path)) for label, path in entries
+                 if path is not None and Path(path).is_file())
+
+
+def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config: Config,
+                 truth: Truth | None, progress) -> MethodResult:
+    """Run one method; a failure (untrusted measurement, or an error) is returned, not raised."""
+    method = config.method
+    settings = MeasurementSettings(scales=tuple(spec.scales), calibrate=method.calibrate,
+                                   keep_stereo=method.keep_stereo,
+                                   normalisation=method.normalisation,
+                                   max_fixed_point=method.max_fixed_point)
+    try:
+        solver = _solver(spec, model, method.levels)
+        m = measure(model.mesh, images, cameras, solver, settings, progress=progress)
+    except (MeasurementInputError, MeshError):
+        raise                                  # the inputs are wrong for every method
+    except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+        logger.warning("%s failed: %s", spec.label, err)
+        return MethodResult(spec=spec, measurement=None, mesh=model.mesh, distance_to_bfp_mm=None,
+                            shape_rms_error_mm=None, status="failed",
+                            failure=" ".join(str(err).split()) or type(err).__name__)
+    errors = rms = None
+    if truth is not None:
+        errors = shape_error_to_surface(m.nodes, truth.specimen)
+        rms = float(np.sqrt(np.mean(errors ** 2)))
+    spline = values = None
+    if spec.name == "georeg" and m.ok:
+        spline, values = measured_spline(solver, m.q, 0)
+    return MethodResult(spec=spec, measurement=m, mesh=model.mesh,
+                        distance_to_bfp_mm=best_fit_plane_distance(m.nodes),
+                        shape_rms_error_mm=rms, spline=spline, spline_values=values,
+                        status="ok" if m.ok else "failed", failure=m.failure,
+                        shape_error_mm=errors)
+
+
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
                 truth: Truth | None = None, progress: bool = False) -> RunResult:
     """Measure the shape with each method of ``specs`` on the same images.
+
+    A method that fails (its measurement judged untrustworthy, or an error inside it) is
+    marked failed and the others go on; wrong inputs (sizes, visibility, the mesh) stop
+    the run.
 
     Parameters
     ----------
@@ -182,37 +307,45 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     specs : the methods (see :func:`default_specs`).
     images : the two images, if already loaded (else read from ``config.images``).
     truth : the known surface and cameras of a synthetic run (for the errors).
+    progress : show a progress bar of the scales of each method (tqdm).
     """
+    started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     if images is None:
         images = (read_image(config.images.cam0), read_image(config.images.cam1))
+    check_sizes(config, images)
     cameras = load_cameras(config.cameras, images)
     method = config.method
     model = build_model(config.geometry, method.levels)
     logger.info("nominal model: %s, %d Q9 nodes, %d elements", config.geometry.kind,
                 model.mesh.n_nodes, model.mesh.n_elements)
     results = []
-    for spec in specs:
-        solver = _solver(spec, model, method.levels)
-        settings = MeasurementSettings(scales=tuple(spec.scales), calibrate=method.calibrate,
-                                       keep_stereo=method.keep_stereo,
-                                       normalisation=method.normalisation,
-                                       max_fixed_point=method.max_fixed_point, progress=progress)
-        logger.info("%s ...", spec.label)
-        m = measure(model.mesh, images, cameras, solver, settings)
-        error = None
-        if truth is not None:
-            error = float(np.sqrt(np.mean(shape_error_to_surface(m.nodes, truth.specimen) ** 2)))
-        spline = values = None
-        if spec.name == "georeg":
-            spline, values = measured_spline(solver, m.q, 0)
-        results.append(MethodResult(spec=spec, measurement=m, mesh=model.mesh,
-                                    distance_to_bfp_mm=best_fit_plane_distance(m.nodes),
-                                    shape_rms_error_mm=error, spline=spline, spline_values=values))
-        logger.info("%s: residual %.3f%%, %d iterations, %.1f s%s", spec.label, m.residual_percent,
-                    m.iterations, m.time_s, "" if error is None else f", error {error * 1e3:.2f} um")
+    for k, spec in enumerate(specs, start=1):
+        logger.info("method %d of %d: %s ...", k, len(specs), spec.label)
+        with tqdm(total=len(spec.scales), desc=f"{k}/{len(specs)} {spec.label}", unit="scale",
+                  disable=not progress, leave=False) as bar:
+            def on_scale(done: int, total: int, report) -> None:
+                bar.set_postfix(residual=f"{report.residual_percent:.2f}%")
+                bar.update(1)
+            result = _measure_one(spec, model, images, cameras, config, truth, on_scale)
+        results.append(result)
+        m = result.measurement
+        if m is not None:
+            error = result.shape_rms_error_mm
+            logger.info("%s: %s, residual %.3f%% (noise floor %.3f%%), %d iterations, %.1f s%s",
+                        spec.label, result.status, m.residual_percent, m.noise_percent,
+                        m.iterations, m.time_s, "" if error is None else f", error {error * 1e3:.2f} um")
     return RunResult(results=tuple(results), truth_available=truth is not None,
                      images=tuple(im.values for im in images),
-                     one_fine_iteration_s=_one_fine_iteration_s(results))
+                     one_fine_iteration_s=_one_fine_iteration_s(results), config=config,
+                     inputs=input_files(config), version=package_version(), started=started)
+
+
+def package_version() -> str:
+    """The installed version of ``georeg`` ("unknown" when not installed)."""
+    try:
+        return importlib.metadata.version("georeg")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
 
 
 # ----------------------------------------------------------------------------- demo

@@ -1,12 +1,19 @@
 """The self-contained HTML report of a run (figures embedded, inline CSS, no external link).
 
-It holds the table of the methods, the figures and the two claims of the paper checked on
+It holds what produced the report (:mod:`georeg_app.provenance`), the table of the methods
+(failed methods greyed out with their reason, the best method highlighted and the
+criterion said), the figures and, where they apply, the two claims of the paper checked on
 the run's own numbers (a FAIL is printed as such, never hidden):
 
 - shape: the georeg RMS shape error (vs the truth) is below every Tikhonov run's and at
-  most 0.3 times the unregularized FE run's (needs the truth: demo);
+  most 0.3 times the unregularized FE run's (needs the truth, a georeg, an FE and a
+  Tikhonov method: the demo);
 - multiscale (Fig. 11): the georeg multiscale run reaches a final residual equal to or
-  lower than the monoscale run's, in at most half the monoscale run's time.
+  lower than the monoscale run's, in at most half the monoscale run's time (needs both).
+
+A claim that does not apply to the run (``passed is None``) is left out of the report.
+A failed georeg method fails its claim; a failed reference method (FE, Tikhonov,
+monoscale) makes the claim not apply.
 """
 from __future__ import annotations
 
@@ -18,22 +25,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .figures import georeg_pair
+from .figures import FE_ERROR_RATIO
+from .provenance import header_html
+from .run_view import best_method, failure, georeg_pair, is_failed, rms_error_um
 
 logger = logging.getLogger(__name__)
 
-FE_ERROR_RATIO = 0.3          # georeg error <= 0.3 x FE error (issue 4)
 TIME_RATIO = 0.5              # multiscale in at most half the monoscale time (Fig. 11)
 RESIDUAL_RTOL = 1e-3          # "equal" residuals: within 0.1 % (relative) of each other
 
 FIGURE_CAPTIONS = {
     "shape_maps": "Measured shapes coloured by the distance to the best-fit plane (Figs. 8-10).",
     "residual_maps": "Gray-level residual at the integration points, % of the image dynamic range "
-                     "(Fig. 12).",
+                     "(Fig. 12); colour scale set by the successful methods (a poor method "
+                     "saturates).",
+    "error_maps": "Signed shape error against the truth per node (µm), after best rigid "
+                  "alignment; colour scale set by the successful methods.",
     "convergence": "Residual against iterations and against time normalised by one fine-scale "
                    "iteration (Fig. 11).",
     "multiscale_vs_monoscale": "Geometric regularization: multiscale against monoscale (Fig. 11).",
-    "shape_errors": "Shape error against the truth and distance to the best-fit plane per method.",
+    "shape_errors": "RMS shape error against the truth (µm, when known) and RMS distance to the "
+                    "best-fit plane (mm) per method.",
 }
 
 #: the reports' style sheet (also used by the examples' reports)
@@ -45,13 +57,20 @@ th { background: #eee; } td:first-child, th:first-child { text-align: left; }
 .PASS { color: #fff; background: #2a7d2a; padding: 0 0.4em; font-weight: bold; }
 .FAIL { color: #fff; background: #b22; padding: 0 0.4em; font-weight: bold; }
 .NOT-CHECKED { color: #fff; background: #777; padding: 0 0.4em; font-weight: bold; }
+td.status { text-align: left; }
+tr.failed td { color: #888; background: #f3f3f3; }
+tr.failed td.status { color: #b22; }
+tr.best td { background: #e3f4e3; font-weight: bold; }
+table.inputs td, table.rig td { font-family: monospace; font-size: 0.85em; text-align: left; }
+table.inputs th, table.rig th { text-align: left; }
+pre { background: #f6f6f6; padding: 0.7em; overflow-x: auto; }
 figure { margin: 1.5em 0; } img { max-width: 100%; } figcaption { color: #555; }
 """
 
 
 @dataclass(frozen=True)
 class Claim:
-    """One claim checked on a run: ``passed`` is None when it cannot be checked."""
+    """One claim checked on a run: ``passed`` is None when it does not apply to the run."""
 
     name: str
     passed: bool | None
@@ -77,15 +96,19 @@ def shape_claim(run) -> Claim:
     tik = [r for r in run.results if r.spec.name == "tikhonov"]
     if multi is None or not fe or not tik:
         return Claim(name, None, "the run needs a georeg, an FE and at least one Tikhonov method")
-    geo, fe_err = multi.shape_rms_error_mm, fe[0].shape_rms_error_mm
-    tik_err = [r.shape_rms_error_mm for r in tik]
+    if any(is_failed(r) for r in [fe[0], *tik]):
+        return Claim(name, None, "a reference method (FE or Tikhonov) failed")
+    if is_failed(multi):
+        return Claim(name, False, f"{multi.spec.label} failed: {failure(multi)}")
+    geo, fe_err = rms_error_um(multi), rms_error_um(fe[0])
+    tik_err = [rms_error_um(r) for r in tik]
     if geo is None or fe_err is None or any(e is None for e in tik_err) or fe_err <= 0:
         return Claim(name, None, "a method of the run has no shape error against the truth")
     below_tik = all(geo < e for e in tik_err)
     below_fe = geo <= FE_ERROR_RATIO * fe_err
-    tik_text = ", ".join(f"{r.spec.label}: {_f(e)} mm" for r, e in zip(tik, tik_err))
-    detail = (f"georeg {_f(geo)} mm; {tik_text} ({'all above' if below_tik else 'NOT all above'}); "
-              f"FE {_f(fe_err)} mm, ratio georeg/FE = {_f(geo / fe_err, 3)} "
+    tik_text = ", ".join(f"{r.spec.label}: {_f(e)} µm" for r, e in zip(tik, tik_err))
+    detail = (f"georeg {_f(geo)} µm; {tik_text} ({'all above' if below_tik else 'NOT all above'}); "
+              f"FE {_f(fe_err)} µm, ratio georeg/FE = {_f(geo / fe_err, 3)} "
               f"({'<=' if below_fe else '>'} {FE_ERROR_RATIO:g})")
     return Claim(name, bool(below_tik and below_fe), detail)
 
@@ -93,7 +116,9 @@ def shape_claim(run) -> Claim:
 def time_to_reach(result, target_percent: float) -> float:
     """Time (s) at which ``result`` first reaches a residual <= ``target_percent`` at the
     full-resolution scale 0 (coarse-scale residuals are on coarse images, Remark 10);
-    its total time if only its final state does; inf if it never does."""
+    its total time if only its final state does; inf if it never does (or has no measurement)."""
+    if result.measurement is None:
+        return math.inf
     for record in result.measurement.history:
         if record.get("scale", 0) == 0 and record.get("residual_percent", np.inf) <= target_percent:
             return float(record["time_s"])
@@ -109,6 +134,10 @@ def multiscale_claim(run) -> Claim:
     multi, mono = georeg_pair(run)
     if multi is None or mono is None:
         return Claim(name, None, "the run needs a georeg multiscale and a georeg monoscale method")
+    if is_failed(mono):
+        return Claim(name, None, f"the reference {mono.spec.label} failed: {failure(mono)}")
+    if is_failed(multi):
+        return Claim(name, False, f"{multi.spec.label} failed: {failure(multi)}")
     r_multi, r_mono = multi.measurement.residual_percent, mono.measurement.residual_percent
     t_mono = float(mono.measurement.time_s)
     target = r_mono * (1.0 + RESIDUAL_RTOL)
@@ -127,7 +156,7 @@ def multiscale_claim(run) -> Claim:
 
 
 def check_claims(run) -> tuple[Claim, ...]:
-    """The two claims of issue 4 on ``run``."""
+    """The two claims of issue 4 on ``run`` (``passed`` None where a claim does not apply)."""
     claims = (shape_claim(run), multiscale_claim(run))
     for c in claims:
         logger.log(logging.DEBUG if c.passed is None else logging.INFO,
@@ -135,20 +164,37 @@ def check_claims(run) -> tuple[Claim, ...]:
     return claims
 
 
+def _rms(values) -> float | None:
+    return None if values is None else float(np.sqrt(np.mean(np.square(values))))
+
+
 def methods_table_html(run) -> str:
-    """HTML table: method, param, RMS error vs truth, RMS distance to BFP, residual, iterations, time."""
-    head = ("<tr><th>method</th><th>name</th><th>param</th><th>RMS shape error vs truth (mm)</th>"
-            "<th>RMS distance to BFP (mm)</th><th>residual (% dyn.)</th><th>iterations</th>"
-            "<th>time (s)</th><th>converged</th></tr>")
+    """HTML table of the methods: status (failed: reason), RMS error vs truth (um), RMS
+    distance to BFP (mm), residual and noise level (%; the column only when the run gives
+    ``noise_percent``), iterations, time, convergence. Failed rows have class "failed",
+    the best method's row class "best"."""
+    noise = any(getattr(r.measurement, "noise_percent", None) is not None for r in run.results)
+    head = ("<tr><th>method</th><th>name</th><th>param</th><th>status</th>"
+            "<th>RMS shape error vs truth (µm)</th><th>RMS distance to BFP (mm)</th>"
+            "<th>residual (% dyn.)</th>" + ("<th>noise level (% dyn.)</th>" if noise else "")
+            + "<th>iterations</th><th>time (s)</th><th>converged</th></tr>")
+    best, _ = best_method(run)
     rows = []
     for r in run.results:
         m = r.measurement
-        bfp = float(np.sqrt(np.mean(np.square(r.distance_to_bfp_mm))))
+        status = f"failed: {failure(r)}" if is_failed(r) else ("best" if r is best else "ok")
         cells = [r.spec.label, r.spec.name, "" if r.spec.param is None else f"{r.spec.param:g}",
-                 _f(r.shape_rms_error_mm), _f(bfp), _f(m.residual_percent), str(int(m.iterations)),
-                 _f(m.time_s, 3), "yes" if m.converged else "no"]
-        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
-    return f"<table>\n{head}\n" + "\n".join(rows) + "\n</table>"
+                 status, _f(rms_error_um(r)), _f(_rms(r.distance_to_bfp_mm))]
+        if m is None:
+            cells += ["n/a"] * (5 if noise else 4)
+        else:
+            cells += [_f(m.residual_percent), *([_f(getattr(m, "noise_percent", None))] * noise),
+                      str(int(m.iterations)), _f(m.time_s, 3), "yes" if m.converged else "no"]
+        css = "failed" if is_failed(r) else ("best" if r is best else "")
+        tds = "".join(f'<td class="status">{html.escape(c)}</td>' if k == 3 else
+                      f"<td>{html.escape(c)}</td>" for k, c in enumerate(cells))
+        rows.append((f'<tr class="{css}">' if css else "<tr>") + tds + "</tr>")
+    return f"<table class=\"methods\">\n{head}\n" + "\n".join(rows) + "\n</table>"
 
 
 def _claims_html(claims) -> str:
@@ -164,19 +210,29 @@ def _figure_html(name: str, png: bytes) -> str:
             f'src="data:image/png;base64,{data}"><figcaption>{caption}</figcaption></figure>')
 
 
-def report_html(run, figures: dict[str, bytes]) -> str:
-    """One self-contained HTML page: methods table, claims (PASS/FAIL with numbers), figures."""
-    claims = check_claims(run)
+def _summary_line(run) -> str:
+    failed = [r for r in run.results if is_failed(r)]
     truth = ("the true shape is known (synthetic images): errors are after best rigid alignment"
              if run.truth_available else "no true shape: the RMS shape error is not available")
-    body = [
-        "<h1>georeg: FE stereo-DIC shape measurement</h1>",
-        f"<p>{len(run.results)} method(s) on the same images; {html.escape(truth)}. "
-        f"One fine-scale iteration: {_f(run.one_fine_iteration_s, 3)} s.</p>",
-        "<h2>Methods</h2>", methods_table_html(run),
-        "<h2>Claims checked on this run</h2>", _claims_html(claims),
-        "<h2>Figures</h2>", *(_figure_html(n, png) for n, png in figures.items()),
-    ]
+    text = (f"{len(run.results)} method(s) on the same images; {truth}. "
+            f"One fine-scale iteration: {_f(run.one_fine_iteration_s, 3)} s.")
+    if failed:
+        text += (f" {len(failed)} method(s) failed ({', '.join(r.spec.label for r in failed)}): "
+                 "greyed out, drawn faded or not at all, and never setting a colour scale.")
+    return f"<p>{html.escape(text)}</p>"
+
+
+def report_html(run, figures: dict[str, bytes]) -> str:
+    """One self-contained HTML page: what produced it, methods table with the best method,
+    the claims that apply (PASS/FAIL with numbers), figures."""
+    claims = [c for c in check_claims(run) if c.passed is not None]
+    _, why_best = best_method(run)
+    body = ["<h1>georeg: FE stereo-DIC shape measurement</h1>", _summary_line(run),
+            header_html(run), "<h2>Methods</h2>", methods_table_html(run),
+            f'<p class="best-method">{html.escape(why_best)}</p>']
+    if claims:
+        body += ['<h2 id="claims">Claims of the paper checked on this run</h2>', _claims_html(claims)]
+    body += ["<h2>Figures</h2>", *(_figure_html(n, png) for n, png in figures.items())]
     return ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             "<title>georeg report</title>\n<style>" + STYLESHEET + "</style>\n</head>\n<body>\n"
             + "\n".join(body) + "\n</body>\n</html>\n")

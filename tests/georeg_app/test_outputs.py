@@ -15,7 +15,9 @@ from georeg_app_fakes import fake_run
 SCHEMA = {"name": str, "param": (float, type(None)), "shape_rms_error_mm": (float, type(None)),
           "distance_to_bfp_rms_mm": float, "residual_percent": float, "iterations": int,
           "time_s": float, "mesh_file": str}
-EXTRA = {"label": str, "converged": bool, "scales": list}
+EXTRA = {"label": str, "converged": bool, "scales": list, "status": str,
+         "failure": (str, type(None)), "noise_percent": (float, type(None)),
+         "residual_to_noise": (float, type(None)), "scale_reports": list}
 
 
 def _tiny_figures():
@@ -25,7 +27,7 @@ def _tiny_figures():
 def test_summary_schema_exactly_as_issue_4():
     run = fake_run()
     doc = json.loads(json.dumps(summary_dict(run), allow_nan=False))      # valid JSON
-    assert set(doc) == {"truth_available", "methods"} and doc["truth_available"] is True
+    assert set(doc) == {"truth_available", "failed_methods", "methods"} and doc["truth_available"] is True
     assert len(doc["methods"]) == len(run.results)
     for entry, result in zip(doc["methods"], run.results):
         assert set(entry) == set(SCHEMA) | set(EXTRA)

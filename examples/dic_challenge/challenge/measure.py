@@ -16,6 +16,7 @@ import time
 from typing import Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from adapters.fesdic_core import NominalModel, measured_spline, multilevel_for_mesh
 from fesdic_core.driver import Measurement, MeasurementSettings, measure
@@ -108,12 +109,16 @@ def measure_nominal(face: Face, nominal: Nominal, images, cameras, *, scales=Non
     settings = MeasurementSettings(scales=scales, calibrate=True, keep_stereo=True,
                                    max_fixed_point=face.method.max_fixed_point,
                                    max_iter=face.method.max_iter,
-                                   points_per_px=face.method.points_per_px, progress=progress)
+                                   points_per_px=face.method.points_per_px)
     occluders = tuple(feature_solid(specimen.feature(o)) for o in face.occluders)
     seen = visibility(occluders, face.method.visibility_margin_mm) if occluders else None
     t0 = time.perf_counter()
-    m = measure(model.mesh, images, cameras, solver, settings, normals=node_normals(model.mesh),
-                visibility=seen)
+    with tqdm(total=len(scales), desc=nominal.name, unit="scale", disable=not progress,
+              leave=False) as bar:
+        m = measure(model.mesh, images, cameras, solver, settings, normals=node_normals(model.mesh),
+                    visibility=seen, progress=lambda k, n, report: bar.update(1))
+    if not m.ok:
+        logger.warning("%s: %s", nominal.name, m.failure)
     elapsed = time.perf_counter() - t0
     try:
         spline, _ = measured_spline(solver, m.q, 0)
