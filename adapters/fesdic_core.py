@@ -79,8 +79,9 @@ def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str)
     """Raise ValueError if an FE element of ``model`` straddles a knot of ``finest``.
 
     Eq. 16 (the mesh reproduces the spline) needs, besides the degrees, every element of a
-    mesh made from the spline to lie inside one knot span of the finest spline level: the
-    spline has a kink (C1 break) at a knot, which no quadratic element can hold. The
+    mesh made from the spline to lie inside one knot span of the finest spline level: a
+    spline function changes polynomial piece at a knot (it is only C^(p-1) there), which
+    no single polynomial element holds. The
     element box runs from its corner 0 (the (u, v) minimum, :func:`fe_mesh_from_spline`)
     to the largest parameters of its nodes (welded seam nodes can only shrink it, never
     make a false alarm).

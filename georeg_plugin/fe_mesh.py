@@ -47,24 +47,28 @@ class ElementDegreeError(ValueError):
 
 
 def check_element_degree(degrees: tuple[int, int], family: str, what: str = "spline") -> None:
-    """Raise :class:`ElementDegreeError` unless every spline degree <= the element degree.
+    """Raise :class:`ElementDegreeError` unless the spline degree <= the element degree.
 
     Eq. 16 (``R^f = C_FE L``: the FE mesh extracted from the spline reproduces it exactly)
     holds only if each spline function is a polynomial of the element's space on every
-    element, i.e. ``max(degrees) <= ELEMENT_DEGREES[family]``.
+    element: ``max(degrees) <= ELEMENT_DEGREES[family]`` for quadrangles (tensor
+    products), ``sum(degrees)`` (the total degree of ``u^p_u v^p_v``) for triangles.
     """
     if family not in ELEMENT_DEGREES:
         raise ValueError(f"family must be one of {sorted(ELEMENT_DEGREES)}, got {family!r}")
     element_degree = ELEMENT_DEGREES[family]
-    if max(int(p) for p in degrees) > element_degree:
+    degrees = tuple(int(p) for p in degrees)
+    triangle = family.startswith("T")
+    needed = sum(degrees) if triangle else max(degrees)
+    if needed > element_degree:
+        kind = "total degree" if triangle else "degree"
         raise ElementDegreeError(
-            f"{what}: degree {tuple(int(p) for p in degrees)} is higher than the degree "
-            f"{element_degree} of {family} elements: a {family} mesh cannot reproduce the spline "
-            f"(Eq. 16 needs spline degree <= element degree, i.e. <= {element_degree} for "
-            f"{family}); use {'Q9 elements or ' if element_degree < 2 else ''}a spline of degree "
-            f"<= {element_degree}, or a legacy mesh with point inversion "
-            "(georeg_plugin.operators.node_parameters), where the spline is only interpolated "
-            "at the nodes")
+            f"{what}: degree {degrees} is higher than the degree {element_degree} of {family} "
+            f"elements: a {family} mesh cannot reproduce the spline (Eq. 16 needs spline "
+            f"{kind} <= element degree, i.e. <= {element_degree} for {family}); use "
+            f"{'Q9 elements or ' if family != 'Q9' else ''}a spline of lower degree, or a "
+            "legacy mesh with point inversion (georeg_plugin.operators.node_parameters), "
+            "where the spline is only interpolated at the nodes")
 
 #: family -> (meshio cell type, points per span, local (a, b) grid offsets, gmsh order)
 _FAMILIES = {

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from georeg_plugin.fe_mesh import ElementDegreeError, fe_mesh_from_spline
+from georeg_plugin.fe_mesh import ElementDegreeError, check_element_degree, fe_mesh_from_spline
 from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
 from georeg_plugin.patch import invert_points
 from georeg_plugin.refine import insert_knots, refine_uniform
@@ -180,3 +180,13 @@ def test_q4_mesh_of_a_bilinear_spline_reproduces_it():
     assert_allclose(values.ravel(), patch.basis(uv) @ c, atol=1e-12)
     assert_allclose(np.einsum("ekc,ecd->ekd", weights, mesh.nodes[corners]).reshape(-1, 3),
                     patch.evaluate(uv), atol=1e-10)
+
+
+def test_triangles_need_the_total_degree():
+    """u^p_u v^p_v has total degree p_u + p_v: a bilinear spline fits T6, not T3."""
+    check_element_degree((1, 1), "T6")
+    check_element_degree((1, 0), "T3")
+    with pytest.raises(ElementDegreeError, match=r"degree \(1, 1\).*T3 elements.*total degree"):
+        check_element_degree((1, 1), "T3")
+    with pytest.raises(ElementDegreeError, match=r"degree \(2, 1\).*T6 elements"):
+        check_element_degree((2, 1), "T6")
