@@ -18,7 +18,7 @@ import numpy as np
 
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
-from georeg_plugin.fe_mesh import fe_mesh_from_spline
+from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
@@ -26,7 +26,8 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline"]
+__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline",
+           "multilevel_for_mesh", "check_nested_mesh"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -54,8 +55,16 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
     patch : coarsest nominal spline.
     elements : number of FE elements per parametric direction (tuple), or an integer
         number of dyadic refinements of ``patch``.
-    family : "Q9" (the paper's choice) or "Q4".
+    family : "Q9" (the paper's choice, spline degree <= 2) or "Q4" (spline degree 1 only).
+
+    Raises
+    ------
+    ElementDegreeError
+        If a degree of ``patch`` exceeds the element degree (Eq. 16 needs it): e.g. "Q4" with
+        the usual degree-2 patches, whose finest spline level has more dofs than the Q4 mesh
+        has nodes (one element per knot span) and is not reproduced between them.
     """
+    check_element_degree(patch.degrees, family, f"nominal model {name!r} ({family} mesh)")
     if isinstance(elements, (int, np.integer)):
         fine, _ = refine_uniform(patch, int(elements))
     else:
@@ -66,15 +75,49 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
                         uv=fe.uv)
 
 
+def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str) -> None:
+    """Raise ValueError if an FE element of ``model`` straddles a knot of ``finest``.
+
+    Eq. 16 (the mesh reproduces the spline) needs, besides the degrees, every element of a
+    mesh made from the spline to lie inside one knot span of the finest spline level: a
+    spline function changes polynomial piece at a knot (it is only C^(p-1) there), which
+    no single polynomial element holds. The
+    element box runs from its corner 0 (the (u, v) minimum, :func:`fe_mesh_from_spline`)
+    to the largest parameters of its nodes (welded seam nodes can only shrink it, never
+    make a false alarm).
+    """
+    tol = 1e-9
+    for block in model.mesh.blocks:
+        uv = model.uv[block.connectivity]                       # (ne, nn, 2)
+        lo, hi = uv[:, 0], uv.max(axis=1)
+        for d, (breaks, name) in enumerate(zip(finest.breaks, "uv")):
+            inside = (breaks[None, :] > lo[:, d, None] + tol) & (breaks[None, :] < hi[:, d, None] - tol)
+            if inside.any():
+                e, k = np.argwhere(inside)[0]
+                raise ValueError(
+                    f"nominal model {model.mesh.name!r}: FE element {int(e)} spans "
+                    f"{name} = [{lo[e, d]:.4g}, {hi[e, d]:.4g}] across the knot {name} = "
+                    f"{breaks[k]:.4g} of {level_name}: the {block.family.name} mesh cannot "
+                    "reproduce it (Eq. 16 needs the FE mesh to refine the finest spline level); "
+                    "use a number of elements that is a multiple of the finest level's knot "
+                    "spans, or fewer levels")
+
+
 def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False) -> MultilevelSpace:
     """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
 
     ``curved`` weights ``C^T[I, J]`` by ``n_I . n_J`` (normals from the core), for nominal
-    surfaces that are not planar.
+    surfaces that are not planar. For a mesh made from the spline (``model.uv``) the
+    preconditions of Eq. 16 are checked: spline degree <= element degree, and every
+    element inside one knot span of the finest level (:func:`check_nested_mesh`).
     """
     normals = node_normals(model.mesh) if curved else None
-    return multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
-                            uv=model.uv)
+    family = model.mesh.blocks[0].family.name if model.uv is not None else None
+    space = multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
+                             uv=model.uv, family=family)
+    if model.uv is not None:
+        check_nested_mesh(model, space.patch(0), f"the finest of {n_levels} spline levels")
+    return space
 
 
 def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,

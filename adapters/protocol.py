@@ -35,7 +35,8 @@ class LevelRecord:
     Attributes
     ----------
     level : int
-        Spline level s (0 is the coarsest).
+        Spline level s, Eq. 28 numbering: 0 is the FINEST level, ``n_levels - 1`` the
+        coarsest (the first run, on the coarsest images).
     image_scale : int
         Image scale of the run (images after ``image_scale`` 2x2 aggregations).
     n_basis : int

@@ -10,6 +10,12 @@ that slide the surface in itself (in-plane translations and rotation of a plate)
 neither q nor the gray levels: the calibration keeps them fixed at their initial (landmark)
 value, see :func:`tangential_motions` and :func:`pose_directions`. The shape is
 reported also as "distance to best-fit plane", as the paper does.
+
+The nodal weights of these least-squares problems must be non-negative (their square
+roots weigh the rows): use :func:`fesdic_core.mesh.nodal_areas`, positive for every
+family. The consistent lumping ``L^T w`` of the pixel quadrature is not: the corner
+shape functions of a T6 element integrate to zero, and its Riemann sum is slightly
+negative at the corners. A negative weight is refused (:func:`checked_weights`).
 """
 from __future__ import annotations
 
@@ -26,11 +32,35 @@ def rigid_normal_modes(nodes: np.ndarray, normals: np.ndarray) -> tuple[np.ndarr
     return np.concatenate([translations, rotations], axis=1), centre
 
 
+def checked_weights(node_weights: np.ndarray, n_nodes: int) -> np.ndarray:
+    """``node_weights`` as floats (n,), or ValueError naming the first negative or bad node.
+
+    Zero weights are allowed (a node of no element); negative ones are not: their square
+    root would be NaN.
+    """
+    w = np.asarray(node_weights, dtype=float)
+    if w.shape != (n_nodes,):
+        raise ValueError(f"node_weights must have shape ({n_nodes},) (one per node), got {w.shape}")
+    bad = np.flatnonzero(~np.isfinite(w) | (w < 0.0))
+    if bad.size:
+        raise ValueError(
+            f"node_weights: {bad.size} of {n_nodes} nodal weights are negative or not finite "
+            f"(first: node {int(bad[0])}, {w[bad[0]]:.3g} mm^2); the gauge needs positive nodal "
+            "areas, e.g. fesdic_core.mesh.nodal_areas (L^T w of the pixel quadrature is <= 0 "
+            "at the corners of T6 elements)")
+    if not w.sum() > 0.0:
+        raise ValueError(f"node_weights: all {n_nodes} nodal weights are zero")
+    return w
+
+
 def split_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
                      node_weights: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted least-squares rigid part of ``q``: returns ``(q_rigid, [t, w], centre)``."""
+    """Weighted least-squares rigid part of ``q``: returns ``(q_rigid, [t, w], centre)``.
+
+    ``node_weights`` (n,) >= 0, e.g. :func:`fesdic_core.mesh.nodal_areas`.
+    """
     modes, centre = rigid_normal_modes(nodes, normals)
-    sw = np.sqrt(node_weights)
+    sw = np.sqrt(checked_weights(node_weights, len(nodes)))
     coef, *_ = np.linalg.lstsq(modes * sw[:, None], q * sw, rcond=1e-10)
     return modes @ coef, coef, centre
 
@@ -67,6 +97,7 @@ def tangential_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.
     They are the (near) null space of the rigid normal modes: no node moves along its
     normal, so the gray levels cannot see them (k = 3 on a plane, 2 on a cylinder).
     """
+    node_weights = checked_weights(node_weights, len(nodes))
     modes, centre = rigid_normal_modes(nodes, normals)
     # metres and radians on a comparable footing: rotations times the surface radius
     radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=node_weights)))

@@ -28,6 +28,7 @@ __all__ = [
     "tangents",
     "surface_jacobian",
     "element_areas",
+    "nodal_areas",
     "node_normals",
     "validate_mesh",
     "rectangle_mesh",
@@ -174,6 +175,38 @@ def _block_areas(nodes: np.ndarray, block: CellBlock) -> np.ndarray:
 def element_areas(mesh: SurfaceMesh) -> list[np.ndarray]:
     """Element areas (mm^2) by Gauss quadrature, one (ne,) array per block."""
     return [_block_areas(mesh.nodes, block) for block in mesh.blocks]
+
+
+#: Share of its element's area that each node receives in :func:`nodal_areas`, gmsh order:
+#: the element is cut into its linear sub-elements (a quadratic element into 4 T3 / Q4 of
+#: equal parent area, through its mid-edge and centre nodes) and each sub-element shares its
+#: area equally among its corners. T6: corners 1/12, mid-edges 3 x 1/12 = 1/4; Q9: corners
+#: 1/16, mid-edges 2/16, centre 4/16. All shares are positive and sum to 1.
+LINEAR_SUBELEMENT_SHARES = {
+    "T3": np.full(3, 1.0 / 3.0),
+    "Q4": np.full(4, 1.0 / 4.0),
+    "T6": np.r_[np.full(3, 1.0 / 12.0), np.full(3, 1.0 / 4.0)],
+    "Q9": np.r_[np.full(4, 1.0 / 16.0), np.full(4, 2.0 / 16.0), 4.0 / 16.0],
+}
+
+
+def nodal_areas(mesh: SurfaceMesh) -> np.ndarray:
+    """Positive lumped nodal areas (n,) mm^2: element areas shared by linear sub-elements.
+
+    The consistent lumping ``sum_e int L_I dA`` is not positive for every family: a T6
+    corner shape function integrates to 0 over its triangle (its pixel Riemann sum is
+    slightly negative), so nodal weights that must be positive (the gauge's weighted least
+    squares) use this rule instead: element ``e`` gives node I the share
+    :data:`LINEAR_SUBELEMENT_SHARES` of its area (Gauss-integrated). The shares sum to the
+    element area, so the nodal areas sum to the mesh area; nodes of no element get 0.
+    """
+    total = np.zeros(mesh.n_nodes)
+    for block, areas in zip(mesh.blocks, element_areas(mesh)):
+        shares = LINEAR_SUBELEMENT_SHARES[block.family.name]
+        total += np.bincount(block.connectivity.ravel(),
+                             weights=(areas[:, None] * shares[None, :]).ravel(),
+                             minlength=mesh.n_nodes)
+    return total
 
 
 def _nodal_contributions(mesh: SurfaceMesh) -> list[np.ndarray]:

@@ -12,6 +12,12 @@ points of one global parametric grid of ``(2 n_u + 1) x (2 n_v + 1)`` values (Q9
 The local axes of every element are ``(xi, eta) = (u, v)``, so the FE normal
 ``x_xi x x_eta`` has the direction of the spline normal ``S_u x S_v``.
 
+Exactness (Eq. 16: ``R^f = C_FE L``, the Lagrange elements reproduce every spline function)
+needs the spline degree <= the element degree in each direction: <= 2 for Q9, <= 1 for Q4.
+A higher degree is refused (:func:`check_element_degree`); such a spline can still
+regularize a mesh through point inversion (``operators.node_parameters``), where the
+spline is only interpolated at the nodes and Eq. 16 is not claimed.
+
 A closed patch (``plate_with_hole``: ``u = 0`` and ``u = 1`` are the same line) gives
 coincident nodes along that seam: they are welded (the node of smaller index is kept,
 with its parameters), so the mesh is conforming; ``multilevel_space`` glues the
@@ -29,7 +35,40 @@ from .patch import SplinePatch
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["SplineFEMesh", "fe_mesh_from_spline"]
+__all__ = ["SplineFEMesh", "fe_mesh_from_spline", "check_element_degree", "ELEMENT_DEGREES",
+           "ElementDegreeError"]
+
+#: polynomial degree of the Lagrange element families a spline may be extracted to
+ELEMENT_DEGREES = {"Q4": 1, "Q9": 2, "T3": 1, "T6": 2}
+
+
+class ElementDegreeError(ValueError):
+    """The spline degree exceeds the element degree: Eq. 16 would not hold."""
+
+
+def check_element_degree(degrees: tuple[int, int], family: str, what: str = "spline") -> None:
+    """Raise :class:`ElementDegreeError` unless the spline degree <= the element degree.
+
+    Eq. 16 (``R^f = C_FE L``: the FE mesh extracted from the spline reproduces it exactly)
+    holds only if each spline function is a polynomial of the element's space on every
+    element: ``max(degrees) <= ELEMENT_DEGREES[family]`` for quadrangles (tensor
+    products), ``sum(degrees)`` (the total degree of ``u^p_u v^p_v``) for triangles.
+    """
+    if family not in ELEMENT_DEGREES:
+        raise ValueError(f"family must be one of {sorted(ELEMENT_DEGREES)}, got {family!r}")
+    element_degree = ELEMENT_DEGREES[family]
+    degrees = tuple(int(p) for p in degrees)
+    triangle = family.startswith("T")
+    needed = sum(degrees) if triangle else max(degrees)
+    if needed > element_degree:
+        kind = "total degree" if triangle else "degree"
+        raise ElementDegreeError(
+            f"{what}: degree {degrees} is higher than the degree {element_degree} of {family} "
+            f"elements: a {family} mesh cannot reproduce the spline (Eq. 16 needs spline "
+            f"{kind} <= element degree, i.e. <= {element_degree} for {family}); use "
+            f"{'Q9 elements or ' if family != 'Q9' else ''}a spline of lower degree, or a "
+            "legacy mesh with point inversion (georeg_plugin.operators.node_parameters), "
+            "where the spline is only interpolated at the nodes")
 
 #: family -> (meshio cell type, points per span, local (a, b) grid offsets, gmsh order)
 _FAMILIES = {
@@ -121,9 +160,16 @@ def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9", weld: bool = Tru
     -------
     SplineFEMesh with ``nodes = patch.evaluate(uv)`` (Eqs. 17, 27); with ``weld``,
     coincident nodes (the seam of a closed patch) are merged.
+
+    Raises
+    ------
+    ElementDegreeError
+        If a degree of ``patch`` exceeds the element degree (2 for Q9, 1 for Q4): the mesh
+        would not reproduce the spline (Eq. 16).
     """
     if family not in _FAMILIES:
         raise ValueError(f"family must be one of {sorted(_FAMILIES)}, got {family!r}")
+    check_element_degree(patch.degrees, family)
     cell_type, per_span, local = _FAMILIES[family]
     gu, gv = (_parametric_grid(b, per_span) for b in patch.breaks)  # non-empty spans
     n_cols = gv.size

@@ -15,8 +15,12 @@ evaluated at the parametric coordinates ``xi_I`` of FE node ``I``:
   the nodes, and ``R^f ~ D^W_LAG L`` is Eq. 27's approximation (exact at the nodes,
   converging with refinement of the last level).  ``C_r`` of NURBS knot insertion
   also satisfies ``R^c = C_r R^f`` exactly, so Eq. 28 still equals node evaluation.
+* Both need the spline degree <= the element degree (Q9: 2, Q4: 1; ``multilevel_space``
+  checks it when told the ``family`` of a mesh made from the spline).
 * Legacy mesh (not made from the spline): the ``xi_I`` come from point inversion of
-  the nodes on the nominal surface (``node_parameters``); the same formula applies.
+  the nodes on the nominal surface (``node_parameters``); the same formula applies, but
+  Eq. 16 is not claimed: ``C^T q_s`` is the spline field at the nodes only, and the FE
+  field interpolates it between them (any element family, any spline degree).
 * Curved surface: the FE unknown of node ``I`` is a displacement along its normal
   ``n_I`` (Remark 1); spline dof ``J`` moves its control point along its own normal
   ``n_J``, hence ``C^T[I, J] = R_J(xi_I) (n_I . n_J)``. On a flat plate ``n_I . n_J = 1``.
@@ -29,7 +33,7 @@ import logging
 import numpy as np
 import scipy.sparse as sps
 
-from .fe_mesh import coincident_groups
+from .fe_mesh import check_element_degree, coincident_groups
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
 
@@ -200,7 +204,8 @@ def gluing_matrix(patch: SplinePatch, tol: float = 1e-9) -> sps.csr_matrix:
 
 def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray,
                      node_normals: np.ndarray | None = None,
-                     uv: np.ndarray | None = None, glue: bool = True) -> MultilevelSpace:
+                     uv: np.ndarray | None = None, glue: bool = True,
+                     family: str | None = None) -> MultilevelSpace:
     """Levels by dyadic refinement of ``coarse_patch``, operators by node evaluation.
 
     Parameters
@@ -210,6 +215,10 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     nodes : (n_fe, 3) FE node coordinates, mm (used for point inversion if ``uv`` is None).
     node_normals : (n_fe, 3), optional (curved surfaces, see ``extraction_operator``).
     uv : (n_fe, 2) parameters of the nodes if known (mesh made from the spline).
+    family : element family ("Q9", "Q4", ...) of a mesh made from the spline; the exact
+        extraction (Eq. 16) it stands for needs every degree of ``coarse_patch`` <= the
+        element degree, else :class:`~georeg_plugin.fe_mesh.ElementDegreeError`. None: not
+        checked (legacy mesh: the spline is only interpolated at the nodes).
 
     Returns
     -------
@@ -220,6 +229,8 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     """
     if int(n_levels) < 1:
         raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    if family is not None:
+        check_element_degree(coarse_patch.degrees, family, "multilevel_space: coarse_patch")
     patches, refinements = [coarse_patch], []
     for _ in range(int(n_levels) - 1):
         fine, C_r = refine_uniform(patches[-1], 1)  # Eq. 13: R_c = C_r R_f

@@ -1,10 +1,15 @@
 """The gauge between shape and camera poses (section 2.2) and the best-fit comparisons."""
 import cv2
 import numpy as np
+import pytest
 
-from fesdic_core.gauge import (best_fit_plane_distance, rigid_align, rigid_normal_modes,
-                               split_rigid_part, tangential_motions, transfer_rigid_part)
-from fesdic_core.mesh import SurfaceMesh, element_areas, node_normals, rectangle_mesh
+from fesdic_core.elements import FAMILIES as FAMILIES_BY_NAME
+from fesdic_core.gauge import (best_fit_plane_distance, move_cameras_with_specimen, rigid_align,
+                               rigid_normal_modes, split_rigid_part, tangential_motions,
+                               transfer_rigid_part)
+from fesdic_core.mesh import (CellBlock, SurfaceMesh, element_areas, nodal_areas, node_normals,
+                              rectangle_mesh)
+from fesdic_core.quadrature import pixel_quadrature
 from fesdic_core.render import demo_cameras
 from fesdic_core.shape import current_nodes
 
@@ -133,3 +138,79 @@ def test_rigid_align_recovers_a_known_motion():
     np.testing.assert_allclose(R_got, R, atol=1e-12)
     np.testing.assert_allclose(t_got, t, atol=1e-12)
     assert np.isclose(np.linalg.det(R_got), 1.0)
+
+
+# --- element families: positive nodal weights, and the gauge on T3, T6, Q4, Q9 -------------
+
+# linear sub-elements of the quadratic elements, local node indices (gmsh order)
+_SUBELEMENTS = {"T6": ("T3", [[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]]),
+                "Q9": ("Q4", [[0, 4, 8, 7], [4, 1, 5, 8], [8, 5, 2, 6], [7, 8, 6, 3]])}
+FAMILIES = ("T3", "T6", "Q4", "Q9")
+
+
+def _curved(family, radius=30.0):
+    """A 60 x 40 mm rectangle mesh of ``family`` bent onto a cylinder of axis x."""
+    flat = rectangle_mesh(60.0, 40.0, 6, 4, family=family)
+    theta = flat.nodes[:, 1] / radius
+    nodes = np.column_stack([flat.nodes[:, 0], radius * np.sin(theta), radius * np.cos(theta)])
+    return SurfaceMesh(nodes, flat.blocks, name=f"cylinder_{family}")
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_nodal_areas_are_positive_and_share_the_element_areas(family):
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family=family)
+    w = nodal_areas(mesh)
+    assert w.min() > 0.0
+    np.testing.assert_allclose(w.sum(), 60.0 * 40.0, rtol=1e-12)
+    if family in _SUBELEMENTS:
+        # independent: the same nodes cut into linear sub-elements, each area in equal thirds/quarters
+        linear, local = _SUBELEMENTS[family]
+        conn = mesh.blocks[0].connectivity[:, local].reshape(-1, len(local[0]))
+        sub = SurfaceMesh(mesh.nodes, (CellBlock(FAMILIES_BY_NAME[linear], conn),))
+        np.testing.assert_allclose(w, _nodal_weights(sub), rtol=1e-12)
+
+
+def test_lumped_quadrature_weights_are_not_positive_on_t6():
+    """Why the gauge does not use L^T w: a T6 corner shape function integrates to 0."""
+    mesh = rectangle_mesh(60.0, 40.0, 12, 8, family="T6")
+    quad = pixel_quadrature(mesh, demo_cameras(image_size=(640, 480), field_mm=72.0))
+    lumped = quad.to_nodes(quad.weight_mm2)
+    corners = np.unique(mesh.blocks[0].connectivity[:, :3])
+    assert np.abs(lumped[corners]).max() < 1e-3 * lumped.max()      # ~0, of either sign
+    assert lumped.min() < 0.0
+    normals = node_normals(mesh)
+    with pytest.raises(ValueError, match=r"node_weights: \d+ of 425 .*negative.*nodal_areas"):
+        tangential_motions(mesh.nodes, normals, lumped)
+    with pytest.raises(ValueError, match="node_weights: .*negative"):
+        split_rigid_part(np.zeros(mesh.n_nodes), mesh.nodes, normals, lumped)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+@pytest.mark.parametrize("shape", ["plate", "cylinder"])
+def test_transfer_rigid_part_removes_the_rigid_normal_part_exactly(family, shape):
+    """q = rigid + shape: the rigid part goes to the cameras exactly, to round-off.
+
+    A purely rigid q leaves nothing and moves the cameras by exactly that motion; for any q
+    the remainder has no weighted rigid part (modes^T W q' = 0) and the cameras moved by the
+    removed motion.
+    """
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family=family) if shape == "plate" else _curved(family)
+    normals, weights = node_normals(mesh), nodal_areas(mesh)
+    cameras = demo_cameras(image_size=(640, 480), field_mm=72.0)
+    modes, centre = rigid_normal_modes(mesh.nodes, normals)
+    # motions off the slides (plate: tx, ty, wz; cylinder of axis x: tx and wx with ty)
+    seen = [2, 3, 4] if shape == "plate" else [2, 4, 5]
+    coef = np.zeros(6)
+    coef[seen] = [0.07, 2e-3, -3e-3]
+    q_rigid = modes @ coef
+    q_new, cams = transfer_rigid_part(q_rigid, mesh.nodes, normals, weights, cameras)
+    np.testing.assert_allclose(q_new, 0.0, atol=1e-12)
+    expected = move_cameras_with_specimen(cameras, coef[:3], coef[3:], centre)
+    for got, want in zip(cams, expected):
+        np.testing.assert_allclose(got.extrinsics, want.extrinsics, atol=1e-12)
+    q = q_rigid + 1e-3 * mesh.nodes[:, 0] * mesh.nodes[:, 1] + 1e-4 * mesh.nodes[:, 0] ** 2
+    q_new, _ = transfer_rigid_part(q, mesh.nodes, normals, weights, cameras)
+    np.testing.assert_allclose(modes.T @ (weights * q_new), 0.0,
+                               atol=1e-10 * np.abs(modes).max() * weights.sum() * np.abs(q).max())
+    np.testing.assert_allclose(split_rigid_part(q_new, mesh.nodes, normals, weights)[0], 0.0,
+                               atol=1e-12)

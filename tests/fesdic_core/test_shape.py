@@ -38,7 +38,7 @@ def test_b_is_minus_the_gradient_of_j(twisted_scene):
     assert np.linalg.eigvalsh(H.toarray()).min() > -1e-9 * abs(H).max()
 
 
-@pytest.mark.parametrize("family,nx,ny", [("Q4", 12, 8), ("Q9", 6, 4), ("T3", 12, 8)])
+@pytest.mark.parametrize("family,nx,ny", [("Q4", 12, 8), ("Q9", 6, 4), ("T3", 12, 8), ("T6", 6, 4)])
 def test_twisted_plate_with_exact_cameras(twisted_scene, family, nx, ny):
     """Done-criterion of the core issue: RMS error < 2% of the maximum deviation, no noise."""
     specimen, cameras, images = twisted_scene

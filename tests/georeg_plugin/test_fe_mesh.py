@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from georeg_plugin.fe_mesh import fe_mesh_from_spline
-from georeg_plugin.geometries import cylinder, plate_with_hole, rectangle
+from georeg_plugin.fe_mesh import ElementDegreeError, check_element_degree, fe_mesh_from_spline
+from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
 from georeg_plugin.patch import invert_points
-from georeg_plugin.refine import refine_uniform
+from georeg_plugin.refine import insert_knots, refine_uniform
 
 L, W, R = 100.0, 50.0, 14.0
 # gmsh Q9 reference nodes on [-1, 1]^2: corners ccw, mid-edges 01 12 23 30, centre
@@ -112,8 +112,15 @@ def test_rectangle_area_is_exact_and_nodes_are_linear_in_uv():
     assert_allclose(mesh.nodes[:, 1], -W / 2 + W * mesh.uv[:, 1], atol=1e-12)
 
 
+def _bilinear_patch(times=1):
+    """A degree-(1, 1) B-spline of a skew flat quadrilateral, non-uniform knots."""
+    corners = [[0.0, 0.0, 0.0], [L, 5.0, 0.0], [L + 8.0, W, 0.0], [-4.0, W - 3.0, 0.0]]
+    patch, _ = insert_knots(quadrilateral(corners, degrees=(1, 1)), [0.3], [0.6])
+    return refine_uniform(patch, times)[0]
+
+
 def test_q4_mesh_has_the_q9_corners():
-    patch, _ = refine_uniform(plate_with_hole(L, W, R), 1)
+    patch = _bilinear_patch()
     q9 = fe_mesh_from_spline(patch, "Q9", weld=False)
     q4 = fe_mesh_from_spline(patch, "Q4", weld=False)
     nu_el, nv_el = patch.n_elements
@@ -144,3 +151,42 @@ def test_seam_of_the_closed_plate_is_welded():
     d = np.linalg.norm(welded.nodes[:, None] - welded.nodes[None], axis=-1) + np.eye(welded.n_nodes)
     assert d.min() > 1e-6
     assert np.array_equal(np.unique(welded.connectivity), np.arange(welded.n_nodes))
+
+
+@pytest.mark.parametrize("degrees,family", [((3, 3), "Q9"), ((2, 3), "Q9"), ((2, 2), "Q4"),
+                                            ((1, 2), "Q4")])
+def test_spline_degree_above_the_element_degree_is_refused(degrees, family):
+    """Eq. 16 needs spline degree <= element degree: the error names both."""
+    corners = [[0.0, 0.0, 0.0], [L, 0.0, 0.0], [L, W, 0.0], [0.0, W, 0.0]]
+    patch = refine_uniform(quadrilateral(corners, degrees=degrees), 1)[0]
+    with pytest.raises(ElementDegreeError,
+                       match=rf"degree \({degrees[0]}, {degrees[1]}\).*{family} elements.*Eq. 16"):
+        fe_mesh_from_spline(patch, family)
+
+
+def test_q4_mesh_of_a_bilinear_spline_reproduces_it():
+    """Degree 1 on Q4 (Eq. 16 holds): the bilinear interpolant of the nodal values of a
+    spline function is that function, at random points of every element."""
+    patch = _bilinear_patch(2)
+    mesh = fe_mesh_from_spline(patch, "Q4", weld=False)
+    rng = np.random.default_rng(2)
+    c = rng.standard_normal(patch.n_dofs)
+    nodal = patch.basis(mesh.uv) @ c
+    s, t = rng.uniform(0.0, 1.0, (2, mesh.n_elements, 5))
+    corners = mesh.connectivity                                 # (u, v) corners ccw
+    weights = np.stack([(1 - s) * (1 - t), s * (1 - t), s * t, (1 - s) * t], -1)
+    values = np.einsum("ekc,ec->ek", weights, nodal[corners])
+    uv = np.einsum("ekc,ecd->ekd", weights, mesh.uv[corners]).reshape(-1, 2)
+    assert_allclose(values.ravel(), patch.basis(uv) @ c, atol=1e-12)
+    assert_allclose(np.einsum("ekc,ecd->ekd", weights, mesh.nodes[corners]).reshape(-1, 3),
+                    patch.evaluate(uv), atol=1e-10)
+
+
+def test_triangles_need_the_total_degree():
+    """u^p_u v^p_v has total degree p_u + p_v: a bilinear spline fits T6, not T3."""
+    check_element_degree((1, 1), "T6")
+    check_element_degree((1, 0), "T3")
+    with pytest.raises(ElementDegreeError, match=r"degree \(1, 1\).*T3 elements.*total degree"):
+        check_element_degree((1, 1), "T3")
+    with pytest.raises(ElementDegreeError, match=r"degree \(2, 1\).*T6 elements"):
+        check_element_degree((2, 1), "T6")

@@ -9,8 +9,8 @@ from numpy.testing import assert_allclose
 from scipy.interpolate import NdBSpline
 from scipy.spatial import Delaunay
 
-from georeg_plugin.fe_mesh import fe_mesh_from_spline
-from georeg_plugin.geometries import cylinder, plate_with_hole, rectangle
+from georeg_plugin.fe_mesh import ElementDegreeError, fe_mesh_from_spline
+from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
 from georeg_plugin.operators import (NodesOutsidePatchError, extraction_operator,
                                      multilevel_space, node_parameters)
 from georeg_plugin.patch import SplinePatch
@@ -246,3 +246,37 @@ def test_glued_levels_are_continuous_across_the_seam_and_nested():
     left = coarse.basis(np.column_stack([np.zeros(20), v])) @ ctrl
     right = coarse.basis(np.column_stack([np.ones(20), v])) @ ctrl
     assert_allclose(left, right, atol=1e-12)
+
+
+def _cubic_rectangle():
+    corners = [[-L / 2, -W / 2, 0.0], [L / 2, -W / 2, 0.0], [L / 2, W / 2, 0.0], [-L / 2, W / 2, 0.0]]
+    return quadrilateral(corners, degrees=(3, 3))
+
+
+def test_multilevel_space_refuses_a_spline_degree_above_the_element_degree():
+    """A Q9 mesh made from the spline claims Eq. 16, which a degree-3 spline breaks."""
+    mesh = fe_mesh_from_spline(refine_uniform(rectangle(L, W), 2)[0], "Q9")
+    with pytest.raises(ElementDegreeError, match=r"coarse_patch: degree \(3, 3\).*Q9 elements"):
+        multilevel_space(_cubic_rectangle(), 2, mesh.nodes, uv=mesh.uv, family="Q9")
+    with pytest.raises(ElementDegreeError, match=r"degree \(2, 2\).*Q4 elements"):
+        multilevel_space(rectangle(L, W), 2, mesh.nodes, uv=mesh.uv, family="Q4")
+    multilevel_space(rectangle(L, W), 2, mesh.nodes, uv=mesh.uv, family="Q9")      # accepted
+
+
+def test_degree_3_spline_on_a_legacy_q9_mesh_interpolates_at_the_nodes_only():
+    """Point inversion (no family, Eq. 16 not claimed): C^T q_s is the cubic spline at the
+    nodes exactly; between them the Q9 interpolant converges (h^3), it is not exact."""
+    coarse = _cubic_rectangle()
+    rng = np.random.default_rng(4)
+    errors = []
+    for times in (2, 3):
+        mesh = fe_mesh_from_spline(refine_uniform(rectangle(L, W), times)[0], "Q9")  # another spline's mesh
+        space = multilevel_space(coarse, 2, mesh.nodes)                               # point inversion
+        patch = space.patch(0)
+        q_s = np.cos(np.arange(patch.n_dofs))                   # one fixed field of level 0
+        field = NdBSpline(patch.knots, q_s.reshape(patch.shape), patch.degrees)
+        uv_nodes = (mesh.nodes[:, :2] + [L / 2, W / 2]) / [L, W]       # the flat map is affine
+        assert_allclose(space.operators[0].T @ q_s, field(uv_nodes), atol=1e-12)
+        values, uv = fe_interpolant_at_random_points(mesh, space.operators[0].T @ q_s, rng)
+        errors.append(np.abs(values - field(uv)).max())
+    assert errors[0] > 1e-6 and errors[1] < errors[0] / 4, errors

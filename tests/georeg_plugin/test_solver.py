@@ -1,10 +1,16 @@
-"""GeometricRegularization: the solve hook of Eqs. 18-21 against dense linear algebra."""
+"""GeometricRegularization: the solve hook of Eqs. 18-21 against dense linear algebra, and
+Eq. 20 on real spline spaces against an independently computed refinement matrix."""
 import numpy as np
 import pytest
 import scipy.sparse as sps
 from numpy.testing import assert_allclose
 
-from georeg_plugin.operators import MultilevelSpace
+from scipy.interpolate import BSpline
+
+from georeg_plugin.fe_mesh import fe_mesh_from_spline
+from georeg_plugin.geometries import plate_with_hole, rectangle
+from georeg_plugin.operators import MultilevelSpace, multilevel_space
+from georeg_plugin.refine import insert_knots, refine_uniform
 from georeg_plugin.solver import GeometricRegularization, SingularProjectionError
 
 
@@ -83,12 +89,84 @@ def test_project_matches_eqs_18_19(two_levels):
     reg = GeometricRegularization(space)
     H = _random_spd(space.n_fe, rng)
     b = rng.standard_normal(space.n_fe)
-    H1, b1 = reg.project(H, b, 1)
-    # Eq. 20: the coarse operators are the refinement of the fine spline ones
-    H0, b0 = reg.project(H, b, 0)
-    Cr = space.refinement[0]
-    assert_allclose(H1.toarray(), (Cr @ H0 @ Cr.T).toarray(), rtol=1e-12, atol=1e-12)
-    assert_allclose(b1, Cr @ b0, rtol=1e-12, atol=1e-12)
+    for level in (0, 1):
+        H_s, b_s = reg.project(H, b, level)
+        C = space.operators[level].toarray()
+        assert_allclose(H_s.toarray(), C @ H.toarray() @ C.T, rtol=1e-12, atol=1e-12)  # Eq. 18
+        assert_allclose(b_s, C @ b, rtol=1e-12, atol=1e-12)                            # Eq. 19
+
+
+# --- Eq. 20 on real spline spaces, against a refinement matrix computed independently -----
+#
+# The plugin builds C_r by Boehm's knot insertion (bspline.insertion_matrix, refine.py).
+# The reference below never calls it: it samples scipy's B-spline bases (coarse and dyadic
+# fine knot vectors) at many points and solves R_f C_r^T = R_c (Eq. 13) by least squares;
+# for NURBS the fine weights are the least-squares B-spline coefficients of the (unchanged)
+# weight function W, and R = diag(w) N / W (Eq. 12).
+
+def _dyadic(knots):
+    """The knot vector with the midpoint of every non-empty span inserted once."""
+    b = np.unique(knots)
+    return np.sort(np.r_[knots, 0.5 * (b[:-1] + b[1:])])
+
+
+def _samples(knots, per_span=5):
+    b = np.unique(knots)
+    return (b[:-1, None] + np.diff(b)[:, None] * (np.arange(per_span) + 0.5) / per_span).ravel()
+
+
+def _tensor_bspline_basis(knots, degrees, u, v):
+    """N (len(u) * len(v), nu * nv) at the grid of (u, v), dof i * nv + j."""
+    Nu = BSpline.design_matrix(u, knots[0], degrees[0]).toarray()
+    Nv = BSpline.design_matrix(v, knots[1], degrees[1]).toarray()
+    return np.einsum("ai,bj->abij", Nu, Nv).reshape(len(u) * len(v), -1)
+
+
+def _reference_refinements(coarse, n_levels):
+    """C_r of each level s -> s + 1 (s = 0 the finest), by least squares on sampled bases."""
+    knots = [tuple(np.asarray(k, float) for k in coarse.knots)]
+    for _ in range(n_levels - 1):
+        knots.append(tuple(_dyadic(k) for k in knots[-1]))
+    u, v = (_samples(k) for k in knots[-1])            # points in every finest span
+    N = [_tensor_bspline_basis(k, coarse.degrees, u, v) for k in knots]
+    w = [coarse.homogeneous_weights]
+    W = N[0] @ w[0]                                    # the weight function, Eq. 12
+    for Nf in N[1:]:
+        w.append(np.linalg.lstsq(Nf, W, rcond=None)[0])
+    R = [Nk * wk / W[:, None] for Nk, wk in zip(N, w)]  # rational bases, coarse -> fine
+    refinements = []
+    for Rc, Rf in zip(R[:-1], R[1:]):
+        Crt, *_ = np.linalg.lstsq(Rf, Rc, rcond=None)  # R_f C_r^T = R_c (Eq. 13)
+        assert np.abs(Rf @ Crt - Rc).max() < 1e-12     # the coarse basis is in the fine span
+        refinements.append(Crt.T)
+    return refinements[::-1]                          # index s: level s -> s + 1
+
+
+@pytest.mark.parametrize("geometry", ["bspline", "nurbs"])
+def test_eq_20_against_an_independent_refinement_matrix(geometry):
+    """multilevel_space's C_s satisfy C_{s+1} = C_r C_s (Eqs. 13, 28) and the projected
+    operators H_{s+1} = C_r H_s C_r^T, b_{s+1} = C_r b_s (Eq. 20), with the reference C_r."""
+    if geometry == "bspline":
+        coarse, _ = insert_knots(rectangle(100.0, 50.0), [0.3], [0.55])   # non-uniform knots
+    else:
+        coarse = plate_with_hole(100.0, 50.0, 14.0)                       # one NURBS patch
+    n_levels = 3
+    mesh = fe_mesh_from_spline(refine_uniform(coarse, n_levels - 1)[0], "Q9")
+    space = multilevel_space(coarse, n_levels, mesh.nodes, uv=mesh.uv, glue=False, family="Q9")
+    reference = _reference_refinements(coarse, n_levels)
+    reg = GeometricRegularization(space)
+    rng = np.random.default_rng(7)
+    H = _random_spd(space.n_fe, rng)
+    b = rng.standard_normal(space.n_fe)
+    for s, Cr in enumerate(reference):
+        assert_allclose(space.refinement[s].toarray(), Cr, atol=1e-11)
+        C_fine, C_coarse = space.operators[s].toarray(), space.operators[s + 1].toarray()
+        assert_allclose(C_coarse, Cr @ C_fine, atol=1e-11)                  # Eqs. 13, 28
+        H_f, b_f = reg.project(H, b, s)
+        H_c, b_c = reg.project(H, b, s + 1)
+        scale = np.abs(H_c.toarray()).max()
+        assert_allclose(H_c.toarray(), Cr @ H_f.toarray() @ Cr.T, atol=1e-11 * scale)  # Eq. 20
+        assert_allclose(b_c, Cr @ b_f, atol=1e-11 * np.abs(b_c).max())
 
 
 def test_schedule_maps_scale_to_level(two_levels):
