@@ -27,7 +27,7 @@ import numpy as np
 from .calibration import calibrate_extrinsics
 from .gauge import pose_directions, tangential_motions, transfer_rigid_part
 from .image import Image, pyramid
-from .mesh import SurfaceMesh, node_normals, validate_mesh
+from .mesh import SurfaceMesh, nodal_areas, node_normals, validate_mesh
 from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import PixelQuadrature, pixel_quadrature
 from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
@@ -287,6 +287,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
     log = GaussNewtonLog()
     t0 = time.perf_counter()
+    node_weights = nodal_areas(mesh)          # positive for every family (T6 corners too)
     total_iterations, reports = 0, []
     result = None
     for k, scale in enumerate(settings.scales, start=1):
@@ -294,7 +295,6 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         scaled = [c.scaled(scale) for c in cams]
         nodes_now = current_nodes(mesh.nodes, normals, q)
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px, nodes=nodes_now)
-        node_weights = quad.to_nodes(quad.weight_mm2)
         if settings.calibrate:
             slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         X_now = quad.points(nodes_now)

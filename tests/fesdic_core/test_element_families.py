@@ -21,20 +21,15 @@ MAX_DEVIATION_MM = 0.5
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree
 TRANSLATION = np.array([0.6, -0.48, 0.64])                                # 1 mm
 
-# When calibrating, driver.measure still weighs the gauge (tangential_motions,
-# transfer_rigid_part) with quad.to_nodes(quad.weight_mm2) = L^T w, which is <= 0 at T6
-# corners (a T6 corner shape function integrates to 0): the gauge refuses it. The driver
-# must pass fesdic_core.mesh.nodal_areas(mesh) instead; then this xfail turns into a pass
-# (strict). Without calibration the driver no longer calls the gauge.
-_T6_NEEDS_DRIVER = pytest.mark.xfail(
-    strict=True, raises=ValueError,
-    reason="driver.py weighs the gauge with L^T w (<= 0 at T6 corners) instead of nodal_areas")
+# When calibrating, the gauge (tangential_motions, transfer_rigid_part) is weighed by
+# fesdic_core.mesh.nodal_areas: L^T w is <= 0 at T6 corners (a T6 corner shape function
+# integrates to 0) and the gauge refuses such weights.
 
 
 # Q4 runs calibrated in test_driver.py, and T3, Q4 with exact cameras in test_shape.py, on this scene
 @pytest.mark.parametrize("family,nx,ny,calibrate", [
     ("T3", 12, 8, False), ("Q9", 6, 4, False), ("Q9", 6, 4, True),
-    ("T6", 6, 4, False), pytest.param("T6", 6, 4, True, marks=_T6_NEEDS_DRIVER)])
+    ("T6", 6, 4, False), ("T6", 6, 4, True)])
 def test_every_family_measures_the_twisted_plate(twisted_scene, family, nx, ny, calibrate):
     specimen, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, nx, ny, family=family)
