@@ -355,9 +355,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         reports.append(report)
         if not report.converged:
             # a coarse scale only starts the next one (Remark 3): said, not warned
-            logger.log(logging.WARNING if scale == settings.scales[-1] else logging.INFO,
-                       "scale %d: the %s did not stagnate within its iteration limit", scale,
-                       "shape Gauss-Newton" if not shape.converged else "fixed point")
+            logger.info("scale %d: the %s did not stagnate within its iteration limit", scale,
+                        "shape Gauss-Newton" if not shape.converged else "fixed point")
         logger.info("scale %d: residual %.3f%% (noise floor %.3f%%)", scale,
                     report.residual_percent, report.noise_percent)
         if progress is not None:
@@ -365,7 +364,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     failure = judge(reports[-1].residual_percent, reports[-1].noise_percent, q, mesh.nodes,
                     reports[-1], settings)
     if failure is not None:
-        logger.warning("measurement failed: %s", failure)
+        logger.info("measurement failed: %s", failure)     # the caller reads m.failure
     residual, quad = result
     return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
                        cameras=tuple(cams), residual=residual, quadrature=quad,

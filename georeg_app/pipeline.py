@@ -278,7 +278,7 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
     except (MeasurementInputError, MeshError):
         raise                                  # the inputs are wrong for every method
     except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
-        logger.warning("%s failed: %s", spec.label, err)
+        logger.info("%s failed: %s", spec.label, err)
         return MethodResult(spec=spec, measurement=None, mesh=model.mesh, distance_to_bfp_mm=None,
                             shape_rms_error_mm=None, status="failed",
                             failure=" ".join(str(err).split()) or type(err).__name__)

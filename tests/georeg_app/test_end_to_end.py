@@ -133,3 +133,44 @@ def test_mesh_outside_the_images_is_named(case, tmp_path, capsys):
     _fails_naming(capsys, _config(folder, "c6.toml", geometry=f'kind = "mesh"\nfile = '
                                   f'"{tmp_path / "far.vtu"}"'), tmp_path / "out",
                   "outside", "cam0")
+
+
+def test_swapped_images_fail_the_measurement_and_write_nothing(case, tmp_path, capsys):
+    """cam0 <-> cam1 swapped: the run ends, but its residual is many times what the images'
+    noise explains; `measure` exits 1 with one line saying so and publishes nothing."""
+    folder = case[0]
+    line = _fails_naming(capsys, _config(folder, "c7.toml", cam0="cam1.png", cam1="cam0.png"),
+                         tmp_path / "out", "failed", "times the", "image noise explains")
+    ratio = float(line.split(" is ")[1].split(" times")[0])
+    assert ratio > 3.0, line
+
+
+def test_pure_noise_images_are_refused(case, tmp_path, capsys):
+    folder = case[0]
+    rng = np.random.default_rng(3)
+    for k in range(2):
+        cv2.imwrite(str(tmp_path / f"noise{k}.png"), rng.integers(0, 256, (480, 640)).astype(np.uint8))
+    _fails_naming(capsys, _config(folder, "c8.toml", cam0=str(tmp_path / "noise0.png"),
+                                  cam1=str(tmp_path / "noise1.png")), tmp_path / "out",
+                  "noise0.png", "no texture")
+
+
+def test_a_non_empty_output_folder_is_refused_before_computing(case, tmp_path, capsys):
+    folder = case[0]
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_text("a previous run")
+    assert cli.main(["-q", "measure", str(_config(folder)), "--out", str(out)]) == 1
+    assert "not empty" in capsys.readouterr().err and (out / "old.txt").exists()
+    assert cli.main(["-q", "measure", str(_config(folder)), "--out", str(out), "--overwrite"]) == 0
+    assert not (out / "old.txt").exists() and (out / "summary.json").is_file()
+
+
+@pytest.mark.parametrize("method,message", [("levels = 9", "fewer levels"),
+                                            ("scales = 9", "coarsest image would be")])
+def test_sizes_beyond_the_images_are_refused_before_computing(case, tmp_path, capsys, method, message):
+    folder = case[0]
+    config = _config(folder, "c9.toml")
+    config.write_text(config.read_text().replace("levels = 2", method) if "levels" in method
+                      else config.read_text().replace("scales = 2", method))
+    _fails_naming(capsys, config, tmp_path / "out", message)
