@@ -7,6 +7,7 @@ distances to the TRUE surface after the best rigid alignment.
 """
 import functools
 import json
+from html import escape as html_escape
 
 import meshio
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 from fesdic_core.accuracy import shape_error_to_surface
 from georeg_app import cli, pipeline, report
 from georeg_app.config import MethodConfig
+from georeg_app.figures import georeg_pair
 from shape_truth import bounded_shape_error, rms
 from user_data import perturbed_pose, write_user_data
 
@@ -90,17 +92,15 @@ def test_compare_multiscale_is_at_least_as_good_as_monoscale(compare_run):
     assert errors["georeg (multiscale)"][1] <= 1.05 * errors["georeg (monoscale)"][1]
 
 
-def test_demo_end_to_end_at_half_size_passes_its_claims(tmp_path, monkeypatch):
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
     """`georeg demo` for real, images 612 x 408 px (half the demo's), scales (1, 0).
 
-    Halving the images and dropping the coarsest scale keeps the pixels per element of each
-    scale of the full demo (its scale s is this run's s - 1); with 3 scales the FE run diverges
-    at the coarsest (8 px per element: error 15 mm after 232 iterations). Both claims of the
-    report must PASS on the real results. Measured: georeg 1.8 um, Tikhonov 5/10/20 mm
-    5.5/11/28 um, FE 182 um; multiscale reaches the monoscale residual at 0.42 x its time.
+    Halving the images and dropping the coarsest scale keeps the pixels per element of the
+    full demo's scales 2 and 1 (its scale s is this run's s - 1); with 3 scales at this size
+    the FE run diverges at the coarsest (8 px per element: error 15 mm after 232 iterations).
+    Returns the output folder and the RunResult the report was made from.
     """
-    monkeypatch.setitem(pipeline.DEMO, "image_size", (612, 408))
-    monkeypatch.setattr(pipeline, "MethodConfig", functools.partial(MethodConfig, scales=2))
     runs = []
     real_run_methods = pipeline.run_methods
 
@@ -108,17 +108,58 @@ def test_demo_end_to_end_at_half_size_passes_its_claims(tmp_path, monkeypatch):
         runs.append(real_run_methods(*args, **kwargs))
         return runs[-1]
 
-    monkeypatch.setattr(pipeline, "run_methods", keep)
-    out = tmp_path / "out"
-    assert cli.main(["-q", "demo", "--out", str(out)]) == 0
-    assert (out / "report.html").stat().st_size > 0
+    out = tmp_path_factory.mktemp("demo") / "out"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(pipeline.DEMO, "image_size", (612, 408))
+        mp.setattr(pipeline, "MethodConfig", functools.partial(MethodConfig, scales=2))
+        mp.setattr(pipeline, "run_methods", keep)
+        assert cli.main(["-q", "demo", "--out", str(out)]) == 0
+    (run,) = runs
+    return out, run
+
+
+def test_demo_end_to_end_at_half_size_passes_the_shape_claim(demo_run):
+    """Exit 0, report.html, summary.json with six methods and errors against the truth; the
+    report's shape claim PASSes on the real results. Measured: georeg 1.8 um, Tikhonov
+    5/10/20 mm 5.5/11.5/27.7 um, FE 182 um (ratio 0.010)."""
+    out, run = demo_run
     summary = json.loads((out / "summary.json").read_text())
     assert summary["truth_available"] is True
     assert [m["name"] for m in summary["methods"]] == ["fe", "tikhonov", "tikhonov", "tikhonov",
                                                        "georeg", "georeg"]
     assert all(m["shape_rms_error_mm"] is not None for m in summary["methods"])
-    (run,) = runs
-    claims = report.check_claims(run)
-    assert [c.status for c in claims] == ["PASS", "PASS"], [c.detail for c in claims]
+    shape, multiscale = report.check_claims(run)
+    assert shape.status == "PASS", shape.detail
     html = (out / "report.html").read_text()
-    assert html.count('class="PASS"') == 2 and 'class="FAIL"' not in html
+    assert f'<span class="PASS">PASS</span> {html_escape(shape.name)}' in html
+    # the deterministic half of the multiscale claim: the final residuals are equal (0.1 %)
+    multi, mono = georeg_pair(run)
+    assert multi.measurement.residual_percent <= mono.measurement.residual_percent * (1 + report.RESIDUAL_RTOL)
+
+
+def _work_to_reach(result, target_percent):
+    """Integration-point evaluations (sum of n_points over the history's iterations, every
+    scale and stage) until the first scale-0 record at or below ``target_percent``."""
+    work = 0
+    for record in result.measurement.history:
+        work += record["n_points"]
+        if record["scale"] == 0 and record["residual_percent"] <= target_percent:
+            return work
+    return None
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "multiscale claim (Fig. 11) does not hold on the half-size demo with scales (1, 0): "
+    "multiscale georeg reaches the monoscale residual (1.4794 % x 1.001) after 1.41 M "
+    "integration-point evaluations (10 records at scale 1, 4 at scale 0), the monoscale run "
+    "takes 2.53 M (12 records at scale 0): ratio 0.557 > 0.5. The report's wall-time version "
+    "of the claim is not asserted: under load it gave 0.42, 0.61 and 0.76 on three runs"))
+def test_demo_multiscale_reaches_the_monoscale_residual_with_half_the_work(demo_run):
+    """Fig. 11 in deterministic units (integration-point evaluations instead of seconds)."""
+    _, run = demo_run
+    multi, mono = georeg_pair(run)
+    target = mono.measurement.residual_percent * (1 + report.RESIDUAL_RTOL)
+    mono_work = sum(r["n_points"] for r in mono.measurement.history)
+    multi_work = _work_to_reach(multi, target)
+    assert multi_work is not None and multi_work <= report.TIME_RATIO * mono_work, \
+        (multi_work, mono_work)
