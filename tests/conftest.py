@@ -1,7 +1,7 @@
 """Shared synthetic stereo scenes (rendered once per session, small and deterministic)."""
-import numpy as np
 import pytest
 
+import scenes
 from fesdic_core.image import Image
 from fesdic_core.render import demo_cameras, render_stereo, twisted_plate
 
@@ -14,3 +14,15 @@ def twisted_scene():
     arrays = render_stereo(specimen, cameras, supersample=3, noise_std=0.0, seed=1, progress=False)
     images = tuple(Image.from_array(a, source=f"synthetic cam{k}") for k, a in enumerate(arrays))
     return specimen, cameras, images
+
+
+@pytest.fixture(scope="session")
+def small_demo_scene():
+    """The demo's twisted open-hole plate with waviness and noise, 500 x 333 px (scenes.py)."""
+    return scenes.small_demo_scene()
+
+
+@pytest.fixture(scope="session")
+def bump_scene():
+    """Flat plate with a 0.3 mm, sigma 2 mm bump, 480 x 320 px, noise 2 (scenes.py)."""
+    return scenes.bump_scene()

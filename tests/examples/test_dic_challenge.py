@@ -1,8 +1,12 @@
 """The Stereo DIC Challenge example on the real stereo pair (examples/dic_challenge).
 
-End to end at coarse image scales (2, 1): block height and base flatness against stated
-bounds; the pieces (configuration errors, occlusion by ray casting, the crop of the
-images, the figures of merit on exact shapes) on their own.
+End to end at coarse image scales (2, 1) on the base plate, the block top and the vertical
+half-cylinder: block height, base-plate flatness, bar radius and crest against the two
+INDEPENDENT references of the challenge (README.md, "Real images: the Stereo DIC Challenge";
+challenge/report.py LASER and PYVALE): the laser scan and pyvale's subset DIC on this same
+pair. Tolerances come from the references' own scatter, not from our output. The pieces
+(configuration errors, occlusion by ray casting, the crop of the images, the figures of merit
+on exact shapes) on their own.
 """
 import sys
 from pathlib import Path
@@ -18,29 +22,64 @@ from challenge.config import ConfigError, load_face                  # noqa: E40
 from challenge.geometry import ConvexSolid, feature_solid, face_model  # noqa: E402
 from challenge.measure import initial_cameras, load_images, measure_nominal  # noqa: E402
 from challenge.pipeline import compare, run_challenge                # noqa: E402
+from challenge.report import LASER, PYVALE                           # noqa: E402
 from challenge.visibility import hidden_by                           # noqa: E402
 
-#: laser scan of the challenge (data README): block top 6.36 mm above the base plate
-BLOCK_HEIGHT_MM, BLOCK_TOL_MM = 6.36, 0.03
-#: pyvale's noise floor on the base plate (issue 5): RMS to the best-fit quadric
-BASE_QUADRIC_UM = 3.6
+#: The block height above the plate ring: laser 6.36 mm, pyvale 6.333 mm. The two independent
+#: references differ by 0.027 mm, so nothing finer than 0.03 mm can be called agreement: a
+#: height agrees with the references if it is within 0.03 mm of EACH of them.
+HEIGHT_TOL_MM = 0.03
+#: Base plate, README region: pyvale's RMS to the best-fit plane is 7.9 um, with a noise floor
+#: of 3.6 um (its RMS to the best-fit quadric). Of pyvale's 7.9 um only the part above its own
+#: noise is shape, so a second measurement agrees with it within +-3.6 um (pyvale's noise).
+BASE_PLANE_TOL_UM = PYVALE["base_quadric_um"]
+#: Crests of the bars above the plate ring: pyvale 6.21-6.22 mm, a height like the block's:
+#: the same 0.03 mm scatter of the references applies.
+PYVALE_CREST_MM = (6.21, 6.22)
 
 
 @pytest.fixture(scope="module")
 def coarse_run():
-    run = run_challenge(HERE, ("base", "block_top"), scales=(2, 1))
+    run = run_challenge(HERE, ("base", "block_top", "cylinder_v"), scales=(2, 1))
     return run, compare(run)
 
 
-def test_real_pair_block_height_and_base_flatness(coarse_run):
+def test_real_pair_block_height_agrees_with_laser_and_pyvale(coarse_run):
+    """Block height within 0.03 mm of the laser's 6.36 mm and of pyvale's 6.333 mm.
+    Measured at scales (2, 1): 6.335 mm."""
+    _, c = coarse_run
+    assert abs(c.block.height_mm - LASER["block_height_mm"]) <= HEIGHT_TOL_MM, c.block.height_mm
+    assert abs(c.block.height_mm - PYVALE["block_height_mm"]) <= HEIGHT_TOL_MM, c.block.height_mm
+
+
+def test_real_pair_base_flatness_agrees_with_pyvale(coarse_run):
+    """Base plate (README region): RMS to a quadric below pyvale's noise floor (3.6 um), RMS to
+    a plane within pyvale's noise (3.6 um) of pyvale's 7.9 um. Measured: 2.6 / 8.4 um."""
+    _, c = coarse_run
+    assert c.base_quadric_rms_mm * 1e3 < PYVALE["base_quadric_um"]
+    assert abs(c.base_plane_rms_mm * 1e3 - PYVALE["base_plane_um"]) <= BASE_PLANE_TOL_UM
+
+
+def test_real_pair_bar_radius_and_crest_lie_within_the_references(coarse_run):
+    """Vertical bar: the references disagree on its radius (laser 6.38 mm, pyvale 6.157 mm,
+    0.22 mm apart); a radius that agrees with the references lies between them, from either
+    nominal (cylindrical, flat). Its crest above the plate ring is within 0.03 mm (the
+    references' scatter on heights) of pyvale's 6.21-6.22 mm. Measured: radius 6.231 / 6.220 mm
+    (cylindrical / flat nominal), crest 6.225 mm."""
+    _, c = coarse_run
+    bar = c.cylinders["cylinder_v"]
+    lo, hi = sorted((LASER["radius_mm"]["cylinder_v"], PYVALE["radius_mm"]["cylinder_v"]))
+    assert lo <= bar.fit.radius_mm <= hi, bar.fit.radius_mm
+    assert lo <= bar.fit_flat.radius_mm <= hi, bar.fit_flat.radius_mm
+    assert PYVALE_CREST_MM[0] - HEIGHT_TOL_MM <= bar.crest_above_ring_mm <= PYVALE_CREST_MM[1] + HEIGHT_TOL_MM
+
+
+def test_real_pair_images_match_and_masks_and_frame_are_sane(coarse_run):
+    """Not accuracy claims: sanity of the run (no reference exists for these)."""
     run, c = coarse_run
-    assert abs(c.block.height_mm - BLOCK_HEIGHT_MM) <= BLOCK_TOL_MM
-    # flatness of the base region of the data README: below pyvale's noise floor to a
-    # quadric, and a plate that is not flat to a plane (the bow pyvale sees: 7.9 um)
-    assert c.base_quadric_rms_mm * 1e3 < BASE_QUADRIC_UM
-    assert 5.0 < c.base_plane_rms_mm * 1e3 < 12.0
-    # the images match: residual below 2.5% of the dynamic range at scale 1
-    assert all(r < 2.5 for r in c.residual_percent.values())
+    # the images match: residual below 2.5 % of the dynamic range at scale 1 on the flat faces
+    # (the bar: 2.30 % from its cylindrical nominal, 2.50 % from its flat one)
+    assert c.residual_percent["base"] < 2.5 and c.residual_percent["block_top"] < 2.5
     # the block's solids mask the strips it hides from one camera, but not most of the plate
     assert 0.001 < c.masked_fraction["base"] < 0.05
     # every result is in the frame of the measured base plane (z = 0)

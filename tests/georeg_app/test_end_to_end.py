@@ -14,8 +14,8 @@ import pytest
 from fesdic_core.accuracy import shape_error_to_surface
 from fesdic_core.mesh import rectangle_mesh
 from fesdic_core.mesh_io import write_mesh
-from fesdic_core.rig import write_cameras_json
 from georeg_app import cli
+from user_data import write_user_data
 
 CONFIG = """
 [images]
@@ -37,10 +37,8 @@ RECTANGLE = 'kind = "rectangle"\nlength_mm = 60.0\nwidth_mm = 40.0\nelements = 2
 @pytest.fixture(scope="module")
 def case(twisted_scene, tmp_path_factory):
     specimen, cameras, images = twisted_scene
-    folder = tmp_path_factory.mktemp("user_data")
-    for k, image in enumerate(images):
-        cv2.imwrite(str(folder / f"cam{k}.png"), image.values.astype(np.uint8))
-    write_cameras_json(folder / "cameras.json", cameras)
+    folder = write_user_data(tmp_path_factory.mktemp("user_data"),
+                             [im.values for im in images], cameras)
     return folder, specimen, cameras, images
 
 

@@ -1,0 +1,165 @@
+"""The paper's central claims on the real code path: `georeg compare` and `georeg demo`, no fakes.
+
+The scene is the demo's (twisted open-hole plate, 1 mm twist at the corners of the view plus a
+0.2 mm waviness that no spline level holds exactly, noise of 2 gray levels, specimen pose off by
+0.5 deg / 0.5 mm so that the fixed point calibration <-> shape runs), rendered small. Errors are
+distances to the TRUE surface after the best rigid alignment.
+"""
+import functools
+import json
+from html import escape as html_escape
+
+import meshio
+import numpy as np
+import pytest
+
+from fesdic_core.accuracy import shape_error_to_surface
+from georeg_app import cli, pipeline, report
+from georeg_app.config import MethodConfig
+from georeg_app.figures import georeg_pair
+from shape_truth import bounded_shape_error, rms
+from user_data import perturbed_pose, write_user_data
+
+COMPARE = """
+[images]
+cam0 = "cam0.png"
+cam1 = "cam1.png"
+[cameras]
+file = "cameras.json"
+[geometry]
+kind = "plate_with_hole"
+length_mm = 100.0
+width_mm = 50.0
+hole_radius_mm = 14.0
+elements = 128
+[method]
+levels = 3
+scales = 3
+tikhonov_length_mm = [5.0, 10.0, 20.0]
+calibrate = true
+"""
+
+
+@pytest.fixture(scope="module")
+def compare_run(small_demo_scene, tmp_path_factory):
+    """`georeg compare` on the small demo pair, from files, as a user runs it."""
+    scene = small_demo_scene
+    folder = write_user_data(tmp_path_factory.mktemp("compare"), scene.arrays,
+                             perturbed_pose(scene.cameras))
+    (folder / "config.toml").write_text(COMPARE)
+    out = folder / "out"
+    assert cli.main(["-q", "compare", str(folder / "config.toml"), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    errors = {}
+    for m in summary["methods"]:
+        points = meshio.read(out / m["mesh_file"]).points
+        errors[m["label"]] = (rms(shape_error_to_surface(points, scene.specimen)),
+                              rms(bounded_shape_error(points, scene.specimen)))
+    return summary, errors
+
+
+def test_compare_georeg_beats_fe_and_every_tikhonov_length_against_the_truth(compare_run):
+    """georeg < each Tikhonov length and <= 0.3 x FE, RMS error to the true surface.
+
+    Measured (500 x 333 px, 256 Q9 elements): georeg 3.4 um; Tikhonov 5/10/20 mm 7.1/11/29 um;
+    FE 27 um (ratio 0.12). The same holds modulo a bounded rigid motion (2 deg, 2 mm).
+    """
+    summary, errors = compare_run
+    labels = [m["label"] for m in summary["methods"]]
+    assert labels == ["FE (multiscale)", "Tikhonov 5 mm", "Tikhonov 10 mm", "Tikhonov 20 mm",
+                      "georeg (multiscale)", "georeg (monoscale)"]
+    assert summary["truth_available"] is False            # compare knows no truth: we do
+    for k in (0, 1):                                        # unbounded, bounded alignment
+        geo, fe = errors["georeg (multiscale)"][k], errors["FE (multiscale)"][k]
+        tik = {label: e[k] for label, e in errors.items() if label.startswith("Tikhonov")}
+        assert all(geo < e for e in tik.values()), (geo, tik)
+        assert geo <= report.FE_ERROR_RATIO * fe, (geo, fe)
+    # and it is accurate in absolute terms: < 1 % of the 1 mm twist (0.045 px at 0.22 mm/px)
+    assert errors["georeg (multiscale)"][1] < 0.01
+
+
+def test_compare_multiscale_is_at_least_as_good_as_monoscale(compare_run):
+    """Multiscale georeg ends at the monoscale residual (within 0.1 %) and error (within 5 %).
+
+    Measured: residual 1.544 % vs 1.546 %; error 3.38 vs 3.38 um.
+    """
+    summary, errors = compare_run
+    by = {m["label"]: m for m in summary["methods"]}
+    multi, mono = by["georeg (multiscale)"], by["georeg (monoscale)"]
+    assert multi["scales"] == [2, 1, 0] and mono["scales"] == [0]
+    assert multi["converged"] and mono["converged"]
+    assert multi["residual_percent"] <= mono["residual_percent"] * (1 + report.RESIDUAL_RTOL)
+    assert errors["georeg (multiscale)"][1] <= 1.05 * errors["georeg (monoscale)"][1]
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """`georeg demo` for real, images 612 x 408 px (half the demo's), scales (1, 0).
+
+    Halving the images and dropping the coarsest scale keeps the pixels per element of the
+    full demo's scales 2 and 1 (its scale s is this run's s - 1); with 3 scales at this size
+    the FE run diverges at the coarsest (8 px per element: error 15 mm after 232 iterations).
+    Returns the output folder and the RunResult the report was made from.
+    """
+    runs = []
+    real_run_methods = pipeline.run_methods
+
+    def keep(*args, **kwargs):
+        runs.append(real_run_methods(*args, **kwargs))
+        return runs[-1]
+
+    out = tmp_path_factory.mktemp("demo") / "out"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(pipeline.DEMO, "image_size", (612, 408))
+        mp.setattr(pipeline, "MethodConfig", functools.partial(MethodConfig, scales=2))
+        mp.setattr(pipeline, "run_methods", keep)
+        assert cli.main(["-q", "demo", "--out", str(out)]) == 0
+    (run,) = runs
+    return out, run
+
+
+def test_demo_end_to_end_at_half_size_passes_the_shape_claim(demo_run):
+    """Exit 0, report.html, summary.json with six methods and errors against the truth; the
+    report's shape claim PASSes on the real results. Measured: georeg 1.8 um, Tikhonov
+    5/10/20 mm 5.5/11.5/27.7 um, FE 182 um (ratio 0.010)."""
+    out, run = demo_run
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["truth_available"] is True
+    assert [m["name"] for m in summary["methods"]] == ["fe", "tikhonov", "tikhonov", "tikhonov",
+                                                       "georeg", "georeg"]
+    assert all(m["shape_rms_error_mm"] is not None for m in summary["methods"])
+    shape, multiscale = report.check_claims(run)
+    assert shape.status == "PASS", shape.detail
+    html = (out / "report.html").read_text()
+    assert f'<span class="PASS">PASS</span> {html_escape(shape.name)}' in html
+    # the deterministic half of the multiscale claim: the final residuals are equal (0.1 %)
+    multi, mono = georeg_pair(run)
+    assert multi.measurement.residual_percent <= mono.measurement.residual_percent * (1 + report.RESIDUAL_RTOL)
+
+
+def _work_to_reach(result, target_percent):
+    """Integration-point evaluations (sum of n_points over the history's iterations, every
+    scale and stage) until the first scale-0 record at or below ``target_percent``."""
+    work = 0
+    for record in result.measurement.history:
+        work += record["n_points"]
+        if record["scale"] == 0 and record["residual_percent"] <= target_percent:
+            return work
+    return None
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "multiscale claim (Fig. 11) does not hold on the half-size demo with scales (1, 0): "
+    "multiscale georeg reaches the monoscale residual (1.4794 % x 1.001) after 1.41 M "
+    "integration-point evaluations (10 records at scale 1, 4 at scale 0), the monoscale run "
+    "takes 2.53 M (12 records at scale 0): ratio 0.557 > 0.5. The report's wall-time version "
+    "of the claim is not asserted: under load it gave 0.42, 0.61 and 0.76 on three runs"))
+def test_demo_multiscale_reaches_the_monoscale_residual_with_half_the_work(demo_run):
+    """Fig. 11 in deterministic units (integration-point evaluations instead of seconds)."""
+    _, run = demo_run
+    multi, mono = georeg_pair(run)
+    target = mono.measurement.residual_percent * (1 + report.RESIDUAL_RTOL)
+    mono_work = sum(r["n_points"] for r in mono.measurement.history)
+    multi_work = _work_to_reach(multi, target)
+    assert multi_work is not None and multi_work <= report.TIME_RATIO * mono_work, \
+        (multi_work, mono_work)

@@ -1,0 +1,71 @@
+"""Synthetic scenes of the claims tests (helpers; the session fixtures are in tests/conftest.py)."""
+import dataclasses
+import functools
+
+import numpy as np
+
+from fesdic_core.image import Image
+from fesdic_core.render import (Specimen, demo_cameras, render_stereo, speckle_mm_for,
+                                twisted_plate)
+
+#: the demo's scene (georeg_app.pipeline.DEMO) with images of 500 x 333 px instead of
+#: 1224 x 816: a 180 x 50 mm plate with a 14 mm hole seen over its central 100 mm, twist
+#: of 1 mm at the corners of the view plus a 0.2 mm waviness (not in any spline level),
+#: two cameras at 25 deg, 4 px speckle, noise of 2 gray levels.
+SMALL_DEMO = dict(length_mm=180.0, width_mm=50.0, view_mm=100.0, hole_radius_mm=14.0,
+                  corner_mm=1.0, waviness_mm=0.2, noise_std=2.0, image_size=(500, 333),
+                  field_mm=112.0, stereo_angle_deg=25.0)
+
+#: a flat 60 x 40 mm plate with a Gaussian bump of 0.3 mm, sigma 2 mm (width at half
+#: height 4.7 mm), off-centre: a feature far shorter than a 30 mm Tikhonov length or the
+#: 30 x 20 mm knot spans of a two-level spline of the plate
+BUMP = dict(amplitude=0.3, sigma=2.0, centre=(8.0, 5.0))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scene:
+    specimen: Specimen
+    cameras: tuple            # the exact cameras
+    arrays: tuple             # the two rendered images, gray levels (h, w)
+
+    @property
+    def images(self):
+        return tuple(Image.from_array(a, source=f"synthetic cam{k}") for k, a in enumerate(self.arrays))
+
+
+def small_demo_scene() -> Scene:
+    """The demo's twisted open-hole plate with waviness and noise, 500 x 333 px."""
+    d = SMALL_DEMO
+    cameras = demo_cameras(image_size=d["image_size"], stereo_angle_deg=d["stereo_angle_deg"],
+                           field_mm=d["field_mm"])
+    specimen = twisted_plate(d["length_mm"], d["width_mm"], corner_mm=d["corner_mm"],
+                             hole_radius_mm=d["hole_radius_mm"], waviness_mm=d["waviness_mm"],
+                             view_length_mm=d["view_mm"], speckle_mm=speckle_mm_for(cameras[0], 4.0),
+                             seed=7)
+    arrays = render_stereo(specimen, cameras, supersample=3, noise_std=d["noise_std"], seed=11,
+                           progress=False)
+    return Scene(specimen, tuple(cameras), tuple(arrays))
+
+
+def _bump(x, y, amplitude, sigma, centre):
+    return amplitude * np.exp(-((x - centre[0]) ** 2 + (y - centre[1]) ** 2) / (2 * sigma ** 2))
+
+
+def _bump_gradient(x, y, amplitude, sigma, centre):
+    g = _bump(x, y, amplitude, sigma, centre)
+    return -g * (x - centre[0]) / sigma ** 2, -g * (y - centre[1]) / sigma ** 2
+
+
+def bump_specimen(speckle_mm: float = 0.3, seed: int = 5) -> Specimen:
+    """Flat 60 x 40 mm plate carrying the bump ``BUMP`` (a custom ``Specimen`` surface)."""
+    return Specimen(60.0, 40.0, height=functools.partial(_bump, **BUMP),
+                    height_gradient=functools.partial(_bump_gradient, **BUMP),
+                    speckle_mm=speckle_mm, seed=seed)
+
+
+def bump_scene() -> Scene:
+    """The bump plate, 480 x 320 px over a 72 mm field (0.15 mm/px), noise of 2 gray levels."""
+    cameras = demo_cameras(image_size=(480, 320), field_mm=72.0)
+    specimen = bump_specimen(speckle_mm_for(cameras[0], 4.0))
+    arrays = render_stereo(specimen, cameras, supersample=3, noise_std=2.0, seed=2, progress=False)
+    return Scene(specimen, tuple(cameras), tuple(arrays))

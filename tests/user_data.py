@@ -1,0 +1,21 @@
+"""Test helpers: a user's files of a synthetic scene, and the demo's pose error."""
+import cv2
+import numpy as np
+
+from fesdic_core.gauge import move_cameras_with_specimen
+from fesdic_core.rig import write_cameras_json
+
+
+def perturbed_pose(cameras, angle_deg=0.5, shift_mm=0.5):
+    """The cameras with the specimen pose off by ``angle_deg`` and ``shift_mm`` (as the demo)."""
+    rotation = np.radians(angle_deg) * np.array([0.6, -0.48, 0.64])
+    translation = shift_mm * np.array([0.48, 0.64, -0.6])
+    return move_cameras_with_specimen(cameras, translation, rotation, np.zeros(3))
+
+
+def write_user_data(folder, arrays, cameras):
+    """The files a user has: ``cam0.png``, ``cam1.png`` (8 bit) and ``cameras.json``."""
+    for k, a in enumerate(arrays):
+        cv2.imwrite(str(folder / f"cam{k}.png"), np.asarray(a).astype(np.uint8))
+    write_cameras_json(folder / "cameras.json", cameras)
+    return folder
