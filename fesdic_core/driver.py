@@ -141,14 +141,6 @@ class Measurement:
         return self.failure is None
 
 
-class MeasurementFailedError(RuntimeError):
-    """A measurement that cannot be trusted; ``measurement`` holds it (``failure`` says why)."""
-
-    def __init__(self, measurement: Measurement):
-        super().__init__(measurement.failure)
-        self.measurement = measurement
-
-
 class MeasurementInputError(ValueError):
     """Inputs of a measurement that do not fit together (sizes, visibility)."""
 
