@@ -32,8 +32,22 @@ def _moved(X: np.ndarray, p: np.ndarray, centre: np.ndarray) -> np.ndarray:
     return (X - centre) @ R.T + centre + p[3:]
 
 
-def shape_error_to_surface(points: np.ndarray, specimen: Specimen) -> np.ndarray:
+#: bounds of the rigid alignment: the gauge of a measurement is a rigid motion about as
+#: large as the error of the initial pose (degrees, millimetres), never one that slides the
+#: points across the specimen (which could dodge a localized feature of the truth)
+MAX_ALIGN_ROTATION_RAD = np.deg2rad(5.0)
+MAX_ALIGN_SHIFT_FRACTION = 0.05
+
+
+def shape_error_to_surface(points: np.ndarray, specimen: Specimen,
+                           max_rotation_rad: float = MAX_ALIGN_ROTATION_RAD,
+                           max_shift_mm: float | None = None) -> np.ndarray:
     """Signed distances (n,) of measured points to the true surface after best rigid alignment.
+
+    The alignment is bounded: rotations up to ``max_rotation_rad`` (each component of the
+    rotation vector, about the points' centroid) and shifts up to ``max_shift_mm`` (default
+    :data:`MAX_ALIGN_SHIFT_FRACTION` of the points' extent): a gauge as large as a pose
+    error, so that it cannot slide a flat measurement off a localized feature of the truth.
 
     Parameters
     ----------
@@ -41,9 +55,12 @@ def shape_error_to_surface(points: np.ndarray, specimen: Specimen) -> np.ndarray
     specimen : the synthetic specimen whose surface ``z = height(x, y)`` is the truth.
     """
     centre = points.mean(axis=0)
+    shift = (MAX_ALIGN_SHIFT_FRACTION * float(np.linalg.norm(np.ptp(points, axis=0)))
+             if max_shift_mm is None else float(max_shift_mm))
+    bound = np.r_[np.full(3, float(max_rotation_rad)), np.full(3, shift)]
     fit = least_squares(lambda p: _normal_distance(specimen, _moved(points, p, centre)),
                         np.zeros(6), x_scale=np.r_[np.full(3, 1e-3), np.full(3, 1e-2)],
-                        method="lm")
+                        bounds=(-bound, bound), method="trf", xtol=1e-12, ftol=1e-12)
     return _normal_distance(specimen, _moved(points, fit.x, centre))
 
 

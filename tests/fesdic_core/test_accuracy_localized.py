@@ -25,12 +25,6 @@ def test_bounded_alignment_sees_the_bump():
     assert 0.9 * raw < rms(bounded_shape_error(flat, specimen)) <= raw
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "fesdic_core.accuracy.shape_error_to_surface aligns with an UNBOUNDED rigid motion and "
-    "evaluates the true surface z = height(x, y) outside the specimen (Specimen.contains is "
-    "ignored): for a flat grid against a plate with a 0.3 mm bump (21.2 um RMS apart) the "
-    "Levenberg-Marquardt fit rotates the grid by 5.66 rad about z and shifts it by (25, 73) mm, "
-    "off the specimen, and reports 2e-26 mm: a flat measurement of a bumped part reads as exact"))
 def test_shape_error_to_surface_does_not_dodge_a_localized_feature():
     specimen, flat = bump_specimen(), _flat_grid()
     raw = rms(specimen.height(flat[:, 0], flat[:, 1]))
