@@ -4,7 +4,7 @@ The scene (tests/conftest.py ``bump_scene``): a flat 60 x 40 mm plate carrying a
 bump of 0.3 mm (sigma 2 mm, width at half height 4.7 mm), 480 x 320 px (0.15 mm/px), noise of
 2 gray levels; exact cameras, one image scale. The mesh: 24 x 16 Q9 elements of 2.5 mm, fine
 enough to hold the bump. Errors: distances to the true surface after a rigid motion of at most
-2 deg / 2 mm (tests/shape_truth.py; an unbounded alignment can dodge a localized feature).
+2 deg / 2 mm (tests/shape_truth.py).
 """
 import numpy as np
 import pytest
