@@ -29,6 +29,11 @@ from .rig import place_camera1, stereo_extrinsic_jacobian
 
 logger = logging.getLogger(__name__)
 
+#: a step is accepted unless it raises the residual by more than this fraction: below it,
+#: differences are round-off and the per-element normalisation that Gauss-Newton does not
+#: differentiate (Remark 2), not a worse fit
+ACCEPT_RTOL = 1e-6
+
 
 @dataclass(frozen=True)
 class CalibrationResult:
@@ -111,7 +116,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
             trial_cams = moved(dp)
             trial = evaluate(trial_cams)
-            if trial.std_percent <= std:                   # the residual did not grow
+            if trial.std_percent <= std * (1.0 + ACCEPT_RTOL):                   # did not grow
                 break
             mu = max(10.0 * mu, 1e-4)
         else:                                  # no damped step lowers the residual: p stagnant

@@ -32,7 +32,7 @@ from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import PixelQuadrature, pixel_quadrature
 from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
 from .rig import stereo_transform
-from .shape import GaussNewtonLog, current_nodes, shape_gauss_newton
+from .shape import GaussNewtonLog, chi_square_change, current_nodes, shape_gauss_newton
 from .solvers import DirectSolver, StepSolver
 
 logger = logging.getLogger(__name__)
@@ -47,7 +47,10 @@ class MeasurementSettings:
     tol_mm, fixed_point_tol_mm : stagnation of q at scale 0 (mm); at scale s they are
         multiplied by 2**s (a coarse pixel is 2**s fine pixels).
     fixed_point_tol_px : stagnation of the poses: largest shift of the projected nodes
-        between two fixed-point iterations, in pixels of the current scale.
+        between two fixed-point iterations, in pixels of the current scale. The fixed point
+        has also stagnated when two iterations fit the images equally well (chi-square
+        changes by less than 1, :func:`~fesdic_core.shape.chi_square_change`): p and q
+        then move within their own noise.
     fixed_point_rtol : at a coarse scale (not the finest), the shape Gauss-Newton and the
         fixed point also hand over to the next scale when the residual falls by less than
         this fraction in an iteration (a coarse scale only starts the next, Remark 3); at
@@ -299,6 +302,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         coarse = 2.0 ** scale
         finest = scale == settings.scales[-1]
         fixed_point_converged, previous_residual = not settings.calibrate, np.inf
+        previous_fit = None
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -333,6 +337,13 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             if dq < settings.fixed_point_tol_mm * coarse and dp < settings.fixed_point_tol_px:
                 fixed_point_converged = True                     # p and q stagnate (section 2.2)
                 break
+            if previous_fit is not None and abs(chi_square_change(previous_fit, shape.residual,
+                                                                  quad)) < 1.0:
+                logger.info("scale %d: p and q move within their noise (chi-square changes by "
+                            "less than 1)", scale)
+                fixed_point_converged = True     # the data cannot tell the two states apart
+                break
+            previous_fit = shape.residual
             residual = shape.residual.std_percent
             if not finest and previous_residual - residual <= settings.fixed_point_rtol * residual:
                 logger.info("scale %d: the residual stagnates; the next scale goes on", scale)

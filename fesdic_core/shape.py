@@ -28,6 +28,11 @@ from .solvers import StepSolver
 
 logger = logging.getLogger(__name__)
 
+#: a step is accepted unless it raises the residual by more than this fraction: below it,
+#: differences are round-off and the per-element normalisation that Gauss-Newton does not
+#: differentiate (Remark 2), not a worse fit
+ACCEPT_RTOL = 1e-6
+
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
 
 
@@ -85,7 +90,8 @@ class ShapeResult:
     ``converged``: q stagnated (the last accepted step below the tolerance, or no damped
     step lowers the residual any more) or, when asked (a coarse scale), the residual
     stagnated; False when the iteration limit stopped it. ``stop`` says which:
-    "step", "no descent", "residual" or "iteration limit".
+    "step", "noise" (the step within q's own noise), "no descent", "residual" or
+    "iteration limit".
     ``damping``: the Levenberg-Marquardt factor in force at the end (0: plain Gauss-Newton).
     """
 
@@ -104,6 +110,26 @@ def damped(H: sps.spmatrix, mu: float) -> sps.spmatrix:
     return (H + mu * sps.diags(H.diagonal())).tocsr()
 
 
+def chi_square(res: GrayLevelResidual, quad: PixelQuadrature) -> tuple[float, int]:
+    """The cost ``c = sum_g w_g r_g**2`` of Eq. 7 and the number of points seen."""
+    w = np.where(res.mask, quad.weight_mm2, 0.0)
+    return float(np.dot(w, res.r * res.r)), int(np.count_nonzero(res.mask))
+
+
+def chi_square_change(before: GrayLevelResidual, after: GrayLevelResidual,
+                      quad: PixelQuadrature) -> float:
+    """How much a step improved the fit, in units of chi-square.
+
+    The fall of the cost divided by the residual variance per point, ``c / n``: below 1
+    the data cannot tell the two states apart (q moved within its own 1-sigma confidence
+    region). The variance includes the model error and the pixels are correlated, so the
+    figure errs towards going on.
+    """
+    c0, n = chi_square(before, quad)
+    c1, _ = chi_square(after, quad)
+    return (c0 - c1) * n / c0 if c0 > 0.0 and n else float("inf")
+
+
 def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
@@ -119,8 +145,9 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     A step that raises the residual is refused and retried with ``mu`` ten times larger
     (at most ``max_damping`` times); after an accepted step ``mu`` shrinks tenfold, so the
     residual never grows. Convergence is the stagnation of q (section 2.2): the accepted
-    step is below ``tol_mm`` (mm, largest node), or no damped step lowers the residual any
-    more. ``residual_rtol`` (for the coarse scales of a multiscale run, which only start
+    step is below ``tol_mm`` (mm, largest node), or it changes the fit by less than one unit
+    of chi-square (:func:`chi_square_change`: the data cannot tell q from q + d), or no
+    damped step lowers the residual any more. ``residual_rtol`` (for the coarse scales of a multiscale run, which only start
     the next scale, Remark 3) also stops it when the residual falls by less than that
     fraction in a step. ``max_iter`` reached first leaves ``converged=False``.
     """
@@ -140,7 +167,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         for _ in range(max_damping + 1):
             d = solver.solve(damped(H, mu), b, q, scale)
             trial = evaluate(q + d) if np.all(np.isfinite(d)) else None
-            if trial is not None and trial.std_percent <= std:        # the residual did not grow
+            if trial is not None and trial.std_percent <= std * (1.0 + ACCEPT_RTOL):        # did not grow
                 break
             mu = max(10.0 * mu, 1e-4)
         else:                               # no damped step lowers the residual: q is stagnant
@@ -148,6 +175,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             logger.debug("shape GN scale %d it %d: no damped step lowers the residual (%.4f%%); "
                          "stagnant", scale, it, std)
             break
+        change = chi_square_change(res, trial, quad)
         q, res = q + d, trial
         step = float(np.max(np.abs(d))) if d.size else 0.0
         if log is not None:
@@ -161,6 +189,9 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         mu = mu / 10.0 if mu > 1e-8 else 0.0
         if step < tol_mm:
             converged, stop = True, "step"                               # q stagnates
+            break
+        if abs(change) < 1.0:              # the data cannot tell q from q + d: stagnant
+            converged, stop = True, "noise"
             break
         if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
             converged, stop = True, "residual"
