@@ -43,14 +43,20 @@ def main() -> None:
         runs.append(run_methods(config, specs, images=images, truth=truth))
         totals.append(time.perf_counter() - t)
         print(f"run {k + 1}/{args.repeat}: {totals[-1]:.1f} s")
-    print(f"\n{'method':22s} {'time (s)':>9s} {'residual %':>11s} {'error (um)':>11s} {'iterations':>10s}")
+    print(f"\n{'method':22s} {'time (s)':>9s} {'residual %':>11s} {'error (um)':>11s} "
+          f"{'iterations':>10s}  verdict")
     for i, spec in enumerate(specs):
         results = [run.results[i] for run in runs]
+        if any(r.measurement is None for r in results):
+            print(f"{spec.label:22s} failed: {next(r.failure for r in results if r.measurement is None)}")
+            continue
+        verdicts = sorted({r.status if r.ok else f"failed: {r.failure}" for r in results})
         times = np.median([r.measurement.time_s for r in results])
         residual = np.median([r.measurement.residual_percent for r in results])
         error = np.median([r.shape_rms_error_mm for r in results]) * 1e3
         iterations = int(np.median([r.measurement.iterations for r in results]))
-        print(f"{spec.label:22s} {times:9.1f} {residual:11.3f} {error:11.2f} {iterations:10d}")
+        print(f"{spec.label:22s} {times:9.1f} {residual:11.3f} {error:11.2f} {iterations:10d}  "
+              f"{'; '.join(verdicts)}")
     median_run = runs[int(np.argsort(totals)[len(totals) // 2])]
     print(f"\nall methods: median {np.median(totals):.1f} s over {args.repeat} runs")
     for claim in check_claims(median_run):

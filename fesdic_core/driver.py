@@ -75,7 +75,7 @@ class MeasurementSettings:
     fixed_point_rtol: float = 1e-4
     points_per_px: float = 1.0
     consistency_factor: float = CONSISTENCY_FACTOR
-    max_shape_fraction: float = 0.1
+    max_shape_fraction: float = 0.25
 
     def __post_init__(self):
         if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
