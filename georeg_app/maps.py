@@ -92,6 +92,22 @@ def _empty_panel(ax, result) -> None:
             ha="center", va="center", fontsize=9, color=FAILED_GREY, transform=ax.transAxes)
 
 
+def plan_figure(results, span: np.ndarray) -> tuple[Figure, list]:
+    """A figure with one plan-view panel per method (aspect ``span``); returns it and the
+    ``(ax, result)`` pairs of the methods that have a measurement (the others get
+    :func:`_empty_panel`)."""
+    nrows, ncols = grid(len(results))
+    fig = Figure(figsize=(4.6 * ncols, (4.6 * span[1] / span[0] + 0.9) * nrows))
+    panels = []
+    for k, result in enumerate(results):
+        ax = fig.add_subplot(nrows, ncols, k + 1)
+        if result.measurement is None:
+            _empty_panel(ax, result)
+        else:
+            panels.append((ax, result))
+    return fig, panels
+
+
 def _reference_frame(results) -> tuple[np.ndarray, np.ndarray]:
     """BFP frame of the first successful measurement (else the first measurement)."""
     ranked = sorted(measured(results), key=is_failed)
@@ -188,13 +204,8 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
     bins = (nx, max(1, int(round(nx * span[1] / span[0]))))
     ranges = [[lo[0], hi[0]], [lo[1], hi[1]]]
     vmax = colour_range(results, lambda r: fields[id(r)][1])
-    nrows, ncols = grid(len(results))
-    fig = Figure(figsize=(4.6 * ncols, (4.6 * span[1] / span[0] + 0.9) * nrows))
-    for k, result in enumerate(results):
-        ax = fig.add_subplot(nrows, ncols, k + 1)
-        if result.measurement is None:
-            _empty_panel(ax, result)
-            continue
+    fig, panels = plan_figure(results, span)
+    for ax, result in panels:
         uv, p = fields[id(result)]
         ax.imshow(_binned_mean(uv, p, bins, ranges).T, origin="lower",
                   extent=(lo[0], hi[0], lo[1], hi[1]), cmap=cmap, vmin=-vmax, vmax=vmax,
@@ -235,13 +246,8 @@ def error_maps(run, cmap: str = "RdBu_r") -> bytes | None:
     centre, axes = _reference_frame(results)
     first = (np.asarray(with_errors[0].measurement.nodes, float) - centre) @ axes.T
     span = np.maximum(np.ptp(first[:, :2], axis=0), 1e-9)
-    nrows, ncols = grid(len(results))
-    fig = Figure(figsize=(4.6 * ncols, (4.6 * span[1] / span[0] + 0.9) * nrows))
-    for k, result in enumerate(results):
-        ax = fig.add_subplot(nrows, ncols, k + 1)
-        if result.measurement is None:
-            _empty_panel(ax, result)
-            continue
+    fig, panels = plan_figure(results, span)
+    for ax, result in panels:
         errors = node_errors_um(result)
         if errors is None:
             ax.set_axis_off()
