@@ -114,6 +114,18 @@ def _log_levels(quiet: bool, verbose: bool) -> dict[str, int]:
     return levels
 
 
+class _TimeLine(logging.Formatter):
+    """Each line stamped with the seconds since the command started (a stage time line)."""
+
+    def __init__(self, fmt: str):
+        super().__init__(fmt)
+        self.t0 = time.time()
+
+    def format(self, record: logging.LogRecord) -> str:
+        record.elapsed = record.created - self.t0
+        return super().format(record)
+
+
 @contextlib.contextmanager
 def _logging_to_stderr(quiet: bool, verbose: bool):
     """Log to stderr at the level of --quiet/--verbose for the duration of a command:
@@ -121,8 +133,8 @@ def _logging_to_stderr(quiet: bool, verbose: bool):
     levels = _log_levels(quiet, verbose)
     saved = {name: logging.getLogger(name or None).level for name in levels}
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s" if verbose
-                                           else f"{PROG}: %(message)s"))
+    handler.setFormatter(_TimeLine("%(elapsed)7.1f s %(levelname)s %(name)s: %(message)s"
+                                   if verbose else f"{PROG} %(elapsed)6.1f s: %(message)s"))
     root = logging.getLogger()
     root.addHandler(handler)
     for name, lvl in levels.items():

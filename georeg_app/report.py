@@ -170,13 +170,13 @@ def _rms(values) -> float | None:
 
 def methods_table_html(run) -> str:
     """HTML table of the methods: status (failed: reason), RMS error vs truth (um), RMS
-    distance to BFP (mm), residual and noise level (%; the column only when the run gives
+    distance to BFP (mm), residual and noise floor (%; the column only when the run gives
     ``noise_percent``), iterations, time, convergence. Failed rows have class "failed",
     the best method's row class "best"."""
     noise = any(getattr(r.measurement, "noise_percent", None) is not None for r in run.results)
     head = ("<tr><th>method</th><th>name</th><th>param</th><th>status</th>"
             "<th>RMS shape error vs truth (µm)</th><th>RMS distance to BFP (mm)</th>"
-            "<th>residual (% dyn.)</th>" + ("<th>noise level (% dyn.)</th>" if noise else "")
+            "<th>residual (% dyn.)</th>" + ("<th>noise floor (% dyn.)</th>" if noise else "")
             + "<th>iterations</th><th>time (s)</th><th>converged</th></tr>")
     best, _ = best_method(run)
     rows = []
