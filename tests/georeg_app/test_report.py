@@ -154,7 +154,7 @@ def test_errors_in_micrometres():
     page = report_html(fake_run(), {})
     assert "RMS shape error vs truth (µm)" in page and "(mm)</th><th>residual" in page
     assert "<td>50</td>" in _row(page, "FE (multiscale)")                # 0.05 mm
-    assert "<th>noise level (% dyn.)</th>" in page and "<td>1.8</td>" in _row(page, "FE (multiscale)")
+    assert "<th>noise floor (% dyn.)</th>" in page and "<td>1.8</td>" in _row(page, "FE (multiscale)")
     assert "georeg 10 µm" in page and "FE 50 µm" in page                 # the claim's numbers
 
 
