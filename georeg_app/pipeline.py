@@ -241,6 +241,19 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
             f"{largest} levels")
 
 
+def check_levels(model: NominalModel, levels: int, geometry: GeometryConfig) -> None:
+    """Refuse spline levels whose finest one has more dofs than the FE mesh has nodes
+    (the projection ``C H C^T`` would be singular, and the operators needlessly large)."""
+    (n_u, n_v), (p_u, p_v) = model.patch.n_elements, model.patch.degrees
+    k = 2 ** (levels - 1)
+    dofs = (n_u * k + p_u) * (n_v * k + p_v)
+    if dofs > model.mesh.n_nodes:
+        where = f"[geometry] file = {geometry.file}" if geometry.kind == "mesh" else "[geometry]"
+        raise ValueError(f"[method] levels = {levels}: the finest spline level would have {dofs} "
+                         f"dofs for the {model.mesh.n_nodes} nodes of the FE mesh ({where}); "
+                         "use fewer levels or a finer mesh")
+
+
 def _checksum(path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as f:
@@ -319,6 +332,7 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     cameras = load_cameras(config.cameras, images)
     method = config.method
     model = build_model(config.geometry, method.levels)
+    check_levels(model, method.levels, config.geometry)
     logger.info("nominal model: %s, %d Q9 nodes, %d elements", config.geometry.kind,
                 model.mesh.n_nodes, model.mesh.n_elements)
     results = []

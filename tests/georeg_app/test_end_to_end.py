@@ -172,3 +172,12 @@ def test_sizes_beyond_the_images_are_refused_before_computing(case, tmp_path, ca
     config.write_text(config.read_text().replace("levels = 2", method) if "levels" in method
                       else config.read_text().replace("scales = 2", method))
     _fails_naming(capsys, config, tmp_path / "out", message)
+
+
+def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
+    """A 6 x 4 Q4 mesh file (35 nodes) cannot carry 4 spline levels (100 dofs at the finest)."""
+    folder = case[0]
+    write_mesh(tmp_path / "coarse.vtu", rectangle_mesh(60.0, 40.0, 6, 4, "Q4"))
+    config = _config(folder, "c10.toml", geometry=f'kind = "mesh"\nfile = "{tmp_path / "coarse.vtu"}"')
+    config.write_text(config.read_text().replace("levels = 2", "levels = 4"))
+    _fails_naming(capsys, config, tmp_path / "out", "levels = 4", "100 dofs", "35 nodes", "coarse.vtu")
