@@ -30,8 +30,10 @@ interpolant of the row.
 
 Noise: Gaussian noise of ``noise`` gray levels on both images, then rounding to 8 bits,
 over ``seeds`` seeds (the same realisations for every model). Reported per model and
-speckle size: max |bias| and RMS bias over s (noise-free), the noise std (std over seeds,
-RMS over s) and the total RMS error (over s and seeds, bias and noise together).
+speckle size: max |bias| and RMS bias over s (noise-free), the RMS over s of the mean error
+over seeds (the bias under noise: noise in the interpolated image adds a bias of its own,
+proportional to the noise variance, which no averaging over pixels removes), the noise std
+(std over seeds, RMS over s) and the total RMS error (over s and seeds, all together).
 
 Run: ``python benchmarks/bench_interpolation_bias.py [--quick] [--plot docs/bias.png]``
 """
