@@ -205,9 +205,9 @@ def check_scales(images: Sequence[Image], scales: Sequence[int], min_px: int = 3
     s = max(scales)
     if min(h, w) >> s < min_px:
         raise MeasurementInputError(
-            f"image scale {s} is too coarse for {images[0].source} ({w} x {h} px): "
-            f"{w >> s} x {h >> s} px after {s} halvings, at least {min_px} px a side are needed; "
-            f"use at most {max(0, int(np.log2(min(h, w) / min_px)))} coarse scales")
+            f"image scale {s} is too coarse for {images[0].source} ({w} x {h} px): the coarsest "
+            f"image would be {w >> s} x {h >> s} px after {s} halvings, at least {min_px} px a "
+            f"side are needed; use at most {max(0, int(np.log2(min(h, w) / min_px)))} halvings")
 
 
 def check_texture(X: np.ndarray, mask: np.ndarray, images: Sequence[Image], cameras: Sequence) -> None:

@@ -82,18 +82,10 @@ class NoiseFloor:
     contrast: tuple[float, float]
     percent: float
 
-    def ratio(self, residual_percent: float) -> float:
-        """How many times the noise floor a residual is."""
-        return residual_percent / self.percent if self.percent > 0 else float("inf")
-
     def texture_ratio(self) -> tuple[float, float]:
         """Contrast over noise of each image (how much texture stands above the noise)."""
         return tuple(c / s if s > 0 else (np.inf if c > 0 else 0.0)
                      for c, s in zip(self.contrast, self.sigma_gray))
-
-    def consistent(self, residual_percent: float, factor: float = CONSISTENCY_FACTOR) -> bool:
-        """True when the residual is within ``factor`` times the floor."""
-        return bool(np.isfinite(residual_percent) and self.ratio(residual_percent) <= factor)
 
 
 def residual_noise_floor(X: np.ndarray, mask: np.ndarray, images: Sequence, cameras: Sequence

@@ -1,0 +1,10 @@
+"""The ``georeg`` application: command line, pipeline, outputs and report."""
+from importlib import metadata
+
+
+def installed_version() -> str:
+    """The installed version of ``georeg`` ("unknown" when it is not installed)."""
+    try:
+        return metadata.version("georeg")
+    except metadata.PackageNotFoundError:
+        return "unknown"

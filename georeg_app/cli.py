@@ -27,10 +27,10 @@ import os
 import sys
 import time
 import traceback
-from importlib import metadata
 from pathlib import Path
 from typing import Sequence
 
+from . import installed_version
 from .config import Config, load_config
 
 logger = logging.getLogger(__name__)
@@ -38,13 +38,6 @@ logger = logging.getLogger(__name__)
 PROG = "georeg"
 DEFAULT_DEMO_OUT = "demo_out"
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
-
-
-def _version() -> str:
-    try:
-        return metadata.version("georeg")
-    except metadata.PackageNotFoundError:
-        return "unknown"
 
 
 def _common(parser: argparse.ArgumentParser, suppress: bool) -> None:
@@ -61,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG, description="FE stereo-DIC shape measurement with multilevel geometric "
                                "(spline) regularization (Colantonio et al. 2020).")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     _common(parser, suppress=False)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     demo = sub.add_parser("demo", help="render the embedded twisted open-hole specimen and "

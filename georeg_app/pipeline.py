@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import hashlib
-import importlib.metadata
 import logging
 import math
 import shutil
@@ -27,7 +26,7 @@ from tqdm.auto import tqdm
 from adapters.fesdic_core import NominalModel, georeg_solver, measured_spline, nominal_model
 from fesdic_core.accuracy import shape_error_to_surface
 from fesdic_core.driver import (Measurement, MeasurementInputError, MeasurementSettings,
-                                measure)
+                                check_scales, measure)
 from fesdic_core.gauge import best_fit_plane_distance, move_cameras_with_specimen
 from fesdic_core.image import Image, read_image
 from fesdic_core.mesh import MeshError, SurfaceMesh, validate_mesh
@@ -40,6 +39,7 @@ from georeg_plugin.geometries import plate_with_hole, rectangle
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements
 
+from . import installed_version
 from .config import (CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
                      OutputConfig)
 
@@ -216,11 +216,10 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
     element in the image, and the coarsest image scale at least 32 px a side.
     """
     h, w = images[0].shape
-    scales = config.method.scales
-    if min(h, w) >> (scales - 1) < 32:
-        raise ValueError(f"[method] scales = {scales}: the coarsest image would be "
-                         f"{w >> (scales - 1)} x {h >> (scales - 1)} px (at least 32 a side); "
-                         f"use at most {max(1, int(np.log2(min(h, w) / 32)) + 1)}")
+    try:
+        check_scales(images, config.method.scale_sequence)
+    except MeasurementInputError as err:
+        raise ValueError(f"[method] scales = {config.method.scales}: {err}") from None
     if config.geometry.kind == "mesh":
         return
     levels = config.method.levels
@@ -354,15 +353,7 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     return RunResult(results=tuple(results), truth_available=truth is not None,
                      images=tuple(im.values for im in images),
                      one_fine_iteration_s=_one_fine_iteration_s(results), config=config,
-                     inputs=input_files(config), version=package_version(), started=started)
-
-
-def package_version() -> str:
-    """The installed version of ``georeg`` ("unknown" when not installed)."""
-    try:
-        return importlib.metadata.version("georeg")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
+                     inputs=input_files(config), version=installed_version(), started=started)
 
 
 # ----------------------------------------------------------------------------- demo

@@ -12,23 +12,17 @@ import datetime
 import html
 import json
 import math
-from importlib import metadata
 from typing import Any
 
 import numpy as np
 
+from . import installed_version
 from .run_view import failure, is_failed
 
 
 def package_version(run) -> str:
     """The run's ``version``, else the installed georeg's, else "unknown"."""
-    version = getattr(run, "version", None)
-    if version:
-        return str(version)
-    try:
-        return metadata.version("georeg")
-    except metadata.PackageNotFoundError:
-        return "unknown"
+    return str(getattr(run, "version", None) or installed_version())
 
 
 def _toml_value(value: Any) -> str:
