@@ -23,16 +23,12 @@ from typing import Sequence
 import numpy as np
 from scipy.linalg import null_space
 
+from .damping import damped_step, relaxed
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
 from .rig import place_camera1, stereo_extrinsic_jacobian
 
 logger = logging.getLogger(__name__)
-
-#: a step is accepted unless it raises the residual by more than this fraction: below it,
-#: differences are round-off and the per-element normalisation that Gauss-Newton does not
-#: differentiate (Remark 2), not a worse fit
-ACCEPT_RTOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -112,19 +108,20 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         w = np.where(res.mask, quad.weight_mm2, 0.0)
         M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
         rhs = -(G.T @ (w * res.r))
-        for _ in range(max_damping + 1):                   # Levenberg-Marquardt guard
+
+        def propose(mu: float):                            # Levenberg-Marquardt guard
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
             trial_cams = moved(dp)
-            trial = evaluate(trial_cams)
-            if trial.std_percent <= std * (1.0 + ACCEPT_RTOL):                   # did not grow
-                break
-            mu = max(10.0 * mu, 1e-4)
-        else:                                  # no damped step lowers the residual: p stagnant
+            return dp, trial_cams, evaluate(trial_cams)
+
+        accepted, mu = damped_step(propose, std, mu, max_damping)
+        if accepted is None:                   # no damped step lowers the residual: p stagnant
             converged = True
             logger.debug("calibration it %d: no damped step lowers the residual (%.4f%%)", it, std)
             break
+        dp, trial_cams, trial = accepted
         before, cams, res = cams, trial_cams, trial
-        mu = mu / 10.0 if mu > 1e-8 else 0.0
+        mu = relaxed(mu)
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
         shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))

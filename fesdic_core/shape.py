@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sps
 
+from .damping import damped_step, relaxed
 from .mesh import assemble
 from .parallel import for_each_block
 from .quadrature import PixelQuadrature
@@ -27,11 +28,6 @@ from .residual import GrayLevelResidual, gray_level_residual
 from .solvers import StepSolver
 
 logger = logging.getLogger(__name__)
-
-#: a step is accepted unless it raises the residual by more than this fraction: below it,
-#: differences are round-off and the per-element normalisation that Gauss-Newton does not
-#: differentiate (Remark 2), not a worse fit
-ACCEPT_RTOL = 1e-6
 
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
 
@@ -141,15 +137,15 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
     Each step solves ``(H + mu diag H) d = b`` through the hook (Levenberg-Marquardt;
-    ``mu = 0``, the plain Gauss-Newton step of Eq. 8, whenever that lowers the residual).
-    A step that raises the residual is refused and retried with ``mu`` ten times larger
-    (at most ``max_damping`` times); after an accepted step ``mu`` shrinks tenfold, so the
-    residual never grows. Convergence is the stagnation of q (section 2.2): the accepted
+    ``mu = 0``, the plain Gauss-Newton step of Eq. 8, whenever that lowers the residual;
+    at most ``max_damping`` increases of ``mu``, :mod:`fesdic_core.damping`): the residual
+    never grows. Convergence is the stagnation of q (section 2.2): the accepted
     step is below ``tol_mm`` (mm, largest node), or it changes the fit by less than one unit
     of chi-square (:func:`chi_square_change`: the data cannot tell q from q + d), or no
-    damped step lowers the residual any more. ``residual_rtol`` (for the coarse scales of a multiscale run, which only start
-    the next scale, Remark 3) also stops it when the residual falls by less than that
-    fraction in a step. ``max_iter`` reached first leaves ``converged=False``.
+    damped step lowers the residual any more (:mod:`fesdic_core.damping`).
+    ``residual_rtol`` (for the coarse scales of a multiscale run, which only start the next
+    scale, Remark 3) also stops it when the residual falls by less than that fraction in a
+    step. ``max_iter`` reached first leaves ``converged=False``.
     """
     def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
@@ -164,17 +160,18 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             logger.warning("shape GN scale %d: no integration point is seen by both cameras", scale)
             break
         H, b = shape_operators(quad, normals, res)
-        for _ in range(max_damping + 1):
+
+        def propose(mu: float):
             d = solver.solve(damped(H, mu), b, q, scale)
-            trial = evaluate(q + d) if np.all(np.isfinite(d)) else None
-            if trial is not None and trial.std_percent <= std * (1.0 + ACCEPT_RTOL):        # did not grow
-                break
-            mu = max(10.0 * mu, 1e-4)
-        else:                               # no damped step lowers the residual: q is stagnant
+            return (d, evaluate(q + d)) if np.all(np.isfinite(d)) else None
+
+        accepted, mu = damped_step(propose, std, mu, max_damping)
+        if accepted is None:                # no damped step lowers the residual: q is stagnant
             converged, stop = True, "no descent"
             logger.debug("shape GN scale %d it %d: no damped step lowers the residual (%.4f%%); "
                          "stagnant", scale, it, std)
             break
+        d, trial = accepted
         change = chi_square_change(res, trial, quad)
         q, res = q + d, trial
         step = float(np.max(np.abs(d))) if d.size else 0.0
@@ -186,7 +183,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             on_iteration(it, res.std_percent)
         logger.debug("shape GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, mu %.1e",
                      scale, it, std, res.std_percent, step, mu)
-        mu = mu / 10.0 if mu > 1e-8 else 0.0
+        mu = relaxed(mu)
         if step < tol_mm:
             converged, stop = True, "step"                               # q stagnates
             break
