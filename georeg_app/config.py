@@ -156,41 +156,34 @@ class Config:
         return dataclasses.replace(self, output=OutputConfig(Path(out_dir)))
 
 
-# --------------------------------------------------------------------------- reading helpers
-# the shared machinery of georeg_app.toml_schema, under the names the sections use
-_Table, _show, _check, _existing_file = Table, show, check, existing_file
-_integer, _number, _boolean, _string, _vector, _numbers = (integer, number, boolean, string,
-                                                           vector, numbers)
-
-
 # --------------------------------------------------------------------------- sections
 
 def _images(data: Any, source: Path, base: Path) -> ImagesConfig:
-    t = _Table(data, "[images]", source)
-    cam0 = t.take("cam0", _string, "a file path (string)", required=True)
-    cam1 = t.take("cam1", _string, "a file path (string)", required=True)
+    t = Table(data, "[images]", source)
+    cam0 = t.take("cam0", string, "a file path (string)", required=True)
+    cam1 = t.take("cam1", string, "a file path (string)", required=True)
     t.finish()
-    return ImagesConfig(_existing_file(t, "cam0", cam0, base), _existing_file(t, "cam1", cam1, base))
+    return ImagesConfig(existing_file(t, "cam0", cam0, base), existing_file(t, "cam1", cam1, base))
 
 
 def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
     if not isinstance(data, list):
         raise ConfigError(f"{source}: {where}: expected an array of tables ([[landmarks]]), "
-                          f"got {_show(data)}")
+                          f"got {show(data)}")
     out = []
     for i, item in enumerate(data):
-        t = _Table(item, f"{where}[{i}]", source)
-        xyz = t.take("xyz_mm", _vector(3), "a list of 3 numbers", required=True)
-        p0 = t.take("cam0_px", _vector(2), "a list of 2 numbers", required=True)
-        p1 = t.take("cam1_px", _vector(2), "a list of 2 numbers", required=True)
+        t = Table(item, f"{where}[{i}]", source)
+        xyz = t.take("xyz_mm", vector(3), "a list of 3 numbers", required=True)
+        p0 = t.take("cam0_px", vector(2), "a list of 2 numbers", required=True)
+        p1 = t.take("cam1_px", vector(2), "a list of 2 numbers", required=True)
         t.finish()
         out.append(Landmark(xyz, p0, p1))
     return tuple(out)
 
 
 def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
-    t = _Table(data, "[cameras]", source)
-    paths = {key: t.take(key, _string, "a file path (string)") for key in CAMERA_SOURCES}
+    t = Table(data, "[cameras]", source)
+    paths = {key: t.take(key, string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
     t.finish()
     given = [key for key, value in paths.items() if value is not None]
@@ -206,7 +199,7 @@ def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> Cameras
         raise t.error(given[0], f"needs at least 4 [[landmarks]] to place the specimen, "
                                 f"got {len(landmarks)}")
     return CamerasConfig(landmarks=landmarks,
-                         **{key: _existing_file(t, key, value, base) for key, value in paths.items()})
+                         **{key: existing_file(t, key, value, base) for key, value in paths.items()})
 
 
 _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
@@ -215,60 +208,60 @@ _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
 
 
 def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
-    t = _Table(data, "[geometry]", source)
-    kind = t.take("kind", _string, "a string", required=True)
+    t = Table(data, "[geometry]", source)
+    kind = t.take("kind", string, "a string", required=True)
     if kind not in GEOMETRY_KINDS:
         raise t.error("kind", f"expected one of {', '.join(map(json.dumps, GEOMETRY_KINDS))}, "
-                              f"got {_show(kind)}")
+                              f"got {show(kind)}")
     given = set(t.data)
-    values = {"length_mm": t.take("length_mm", _number, "a number (mm)"),
-              "width_mm": t.take("width_mm", _number, "a number (mm)"),
-              "hole_radius_mm": t.take("hole_radius_mm", _number, "a number (mm)"),
-              "file": t.take("file", _string, "a file path (string)")}
-    elements = t.take("elements", _integer, "an integer")
+    values = {"length_mm": t.take("length_mm", number, "a number (mm)"),
+              "width_mm": t.take("width_mm", number, "a number (mm)"),
+              "hole_radius_mm": t.take("hole_radius_mm", number, "a number (mm)"),
+              "file": t.take("file", string, "a file path (string)")}
+    elements = t.take("elements", integer, "an integer")
     t.finish()
     for key in sorted(_GEOMETRY_KEYS[kind] - given):
         raise t.error(key, f"missing required key (for kind = {json.dumps(kind)})")
     for key in sorted((given & set(values)) - _GEOMETRY_KEYS[kind]):
         raise t.error(key, f"not used with kind = {json.dumps(kind)}; remove it")
     length, width, radius = values["length_mm"], values["width_mm"], values["hole_radius_mm"]
-    _check(t, "length_mm", length, length is not None and length > 0, "> 0")
-    _check(t, "width_mm", width, width is not None and width > 0, "> 0")
-    _check(t, "hole_radius_mm", radius, radius is not None and width is not None
+    check(t, "length_mm", length, length is not None and length > 0, "> 0")
+    check(t, "width_mm", width, width is not None and width > 0, "> 0")
+    check(t, "hole_radius_mm", radius, radius is not None and width is not None
            and 0 < radius < 0.5 * width, f"> 0 and < width_mm / 2 = {0.5 * (width or 0):g}")
-    _check(t, "elements", elements, elements is not None and elements >= 1, ">= 1")
+    check(t, "elements", elements, elements is not None and elements >= 1, ">= 1")
     return GeometryConfig(kind, length, width, radius,
-                          _existing_file(t, "file", values["file"], base), elements)
+                          existing_file(t, "file", values["file"], base), elements)
 
 
 def _method(data: Any, source: Path) -> MethodConfig:
-    t = _Table(data, "[method]", source)
+    t = Table(data, "[method]", source)
     d = MethodConfig()
     m = MethodConfig(
-        name=t.take("name", _string, "a string", default=d.name),
-        levels=t.take("levels", _integer, "an integer", default=d.levels),
-        scales=t.take("scales", _integer, "an integer", default=d.scales),
-        tikhonov_length_mm=t.take("tikhonov_length_mm", _numbers, "a number or a list of numbers (mm)",
+        name=t.take("name", string, "a string", default=d.name),
+        levels=t.take("levels", integer, "an integer", default=d.levels),
+        scales=t.take("scales", integer, "an integer", default=d.scales),
+        tikhonov_length_mm=t.take("tikhonov_length_mm", numbers, "a number or a list of numbers (mm)",
                                   default=d.tikhonov_length_mm),
-        calibrate=t.take("calibrate", _boolean, "true or false", default=d.calibrate),
-        keep_stereo=t.take("keep_stereo", _boolean, "true or false", default=d.keep_stereo),
-        normalisation=t.take("normalisation", _string, "a string", default=d.normalisation),
-        max_fixed_point=t.take("max_fixed_point", _integer, "an integer", default=d.max_fixed_point))
+        calibrate=t.take("calibrate", boolean, "true or false", default=d.calibrate),
+        keep_stereo=t.take("keep_stereo", boolean, "true or false", default=d.keep_stereo),
+        normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
+        max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point))
     t.finish()
-    _check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
-    _check(t, "levels", m.levels, m.levels >= 1, ">= 1")
-    _check(t, "scales", m.scales, m.scales >= 1, ">= 1")
-    _check(t, "tikhonov_length_mm", list(m.tikhonov_length_mm),
+    check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
+    check(t, "levels", m.levels, m.levels >= 1, ">= 1")
+    check(t, "scales", m.scales, m.scales >= 1, ">= 1")
+    check(t, "tikhonov_length_mm", list(m.tikhonov_length_mm),
            all(v > 0 for v in m.tikhonov_length_mm), "> 0")
-    _check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
+    check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
-    _check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
+    check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
     return m
 
 
 def _output(data: Any, source: Path, base: Path) -> OutputConfig:
-    t = _Table(data, "[output]", source)
-    out = t.take("dir", _string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
+    t = Table(data, "[output]", source)
+    out = t.take("dir", string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
     t.finish()
     return OutputConfig(resolve_path(out, base))
 
@@ -286,7 +279,7 @@ def load_config(path: str | os.PathLike) -> Config:
     source = Path(path)
     data = load_toml(source)
     base = source.resolve().parent
-    top = _Table(data, "", source)
+    top = Table(data, "", source)
     images = top.take("images", lambda v: v, "a table", required=True)
     cameras = top.take("cameras", lambda v: v, "a table", required=True)
     landmarks = top.take("landmarks", lambda v: v, "an array of tables")
