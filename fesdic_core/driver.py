@@ -25,7 +25,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 from .calibration import calibrate_extrinsics
-from .gauge import pose_directions, tangential_motions, transfer_rigid_part
+from .gauge import (pose_directions, rigid_normal_modes, tangential_motions,
+                    transfer_rigid_part)
 from .image import Image, pyramid
 from .mesh import SurfaceMesh, nodal_areas, node_normals, validate_mesh
 from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
@@ -34,6 +35,7 @@ from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
 from .rig import stereo_transform
 from .shape import GaussNewtonLog, chi_square_change, current_nodes, shape_gauss_newton
 from .solvers import DirectSolver, StepSolver
+from .uncertainty import LinearisedState, NoiseModel, linearised_state, noise_model, shape_std
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +63,9 @@ class MeasurementSettings:
         floor of the images (:data:`fesdic_core.noise.CONSISTENCY_FACTOR`).
     max_shape_fraction : the correction may reach at most this fraction of the mesh's
         diagonal; a larger one is a diverged measurement.
+    uncertainty : at the end, estimate the noise model and the shape's standard deviation
+        and bias indicator (:mod:`fesdic_core.uncertainty`); costs about two Gauss-Newton
+        iterations at the finest scale.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -76,6 +81,7 @@ class MeasurementSettings:
     points_per_px: float = 1.0
     consistency_factor: float = CONSISTENCY_FACTOR
     max_shape_fraction: float = 0.25
+    uncertainty: bool = True
 
     def __post_init__(self):
         if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
@@ -133,6 +139,10 @@ class Measurement:
     noise_percent: float = float("nan")
     failure: str | None = None
     scales: tuple = ()
+    shape_std_mm: np.ndarray | None = field(default=None, repr=False)
+    shape_bias_mm: np.ndarray | None = field(default=None, repr=False)
+    noise: NoiseModel | None = None
+    state: LinearisedState | None = field(default=None, repr=False)
 
     @property
     def residual_percent(self) -> float:
@@ -299,6 +309,12 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         if k == 1:
             check_texture(X_now, first.mask, images, cams)
         noise = residual_noise_floor(X_now, first.mask, imgs, scaled)
+        if callable(getattr(solver, "start_scale", None)):      # a solver that chooses from data
+            start = linearised_state(mesh.nodes, normals, q, quad, imgs, scaled,
+                                     settings.normalisation, mask)
+            solver.start_scale(scale, noise_model(start, X_now, quad, imgs, scaled, normals,
+                                                  noise.sigma_gray, scale, settings.normalisation,
+                                                  mask))
         coarse = 2.0 ** scale
         finest = scale == settings.scales[-1]
         fixed_point_converged, previous_residual = not settings.calibrate, np.inf
@@ -369,10 +385,38 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     if failure is not None:
         logger.info("measurement failed: %s", failure)     # the caller reads m.failure
     residual, quad = result
+    extras = {}
+    if settings.uncertainty and np.all(np.isfinite(q)):
+        extras = _uncertainty(mesh, normals, node_weights, q, quad, imgs,
+                              [c.scaled(settings.scales[-1]) for c in cams], solver, settings,
+                              mask, noise.sigma_gray)
     return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
                        cameras=tuple(cams), residual=residual, quadrature=quad,
                        history=tuple(log.records), iterations=total_iterations,
                        time_s=time.perf_counter() - t0,
                        converged=failure is None and all(r.converged for r in reports),
                        noise_percent=reports[-1].noise_percent, failure=failure,
-                       scales=tuple(reports))
+                       scales=tuple(reports), **extras)
+
+
+def _uncertainty(mesh: SurfaceMesh, normals: np.ndarray, node_weights: np.ndarray, q: np.ndarray,
+                 quad: PixelQuadrature, images: Sequence[Image], cameras: Sequence, solver,
+                 settings: MeasurementSettings, mask, sigma_gray) -> dict:
+    """The shape's standard deviation and bias indicator at the final state (finest scale)."""
+    scale = settings.scales[-1]
+    state = linearised_state(mesh.nodes, normals, q, quad, images, cameras,
+                             settings.normalisation, mask)
+    X = quad.points(current_nodes(mesh.nodes, normals, q))
+    noise = noise_model(state, X, quad, images, cameras, normals, sigma_gray, scale,
+                        settings.normalisation, mask)
+    modes = None
+    if settings.calibrate:                   # the rigid normal part belongs to the poses (gauge)
+        modes, _ = rigid_normal_modes(mesh.nodes, normals)
+    std = shape_std(state.H, noise.variance, solver, scale, modes, node_weights)
+    bias = None
+    if callable(getattr(solver, "bias_step", None)):
+        bias = np.abs(solver.bias_step(state.H, state.b, q, scale))
+    if std is not None:
+        logger.info("shape uncertainty: std median %.3g um, max %.3g um (noise model kappa %.3g)",
+                    1e3 * np.nanmedian(std), 1e3 * np.nanmax(std), noise.variance)
+    return dict(shape_std_mm=std, shape_bias_mm=bias, noise=noise, state=state)

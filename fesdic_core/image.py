@@ -130,6 +130,11 @@ class Image:
         values.flags.writeable = coefficients.flags.writeable = False   # owned here: no copy
         return cls(values, coefficients, float(values.max() - values.min()), str(source))
 
+    def with_values(self, values: np.ndarray) -> "Image":
+        """An image of new raw pixel values under the same image model and source (e.g.
+        the values plus simulated noise, :mod:`fesdic_core.uncertainty`)."""
+        return Image.from_array(values, self.source)
+
     def __repr__(self) -> str:
         h, w = self.values.shape
         return f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g})"

@@ -88,6 +88,11 @@ def _sparse_solve(A: sps.spmatrix, b: np.ndarray, level: int, what: str,
     return x
 
 
+def _seen_dofs(A: sps.spmatrix) -> np.ndarray:
+    diag = np.abs(A.diagonal())
+    return diag > _ZERO_PIVOT * (diag.max() if diag.size else 0.0)
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class GeometricRegularization:
     """Multilevel spline regularization of a Gauss-Newton step (Eqs. 18-21).
@@ -176,8 +181,7 @@ class GeometricRegularization:
         H_s, b_s = self.project(H, b, s)
         seen = np.ones(b_s.size, dtype=bool)
         if self.hold_unseen:                                   # dofs no point sees keep their value
-            diag = np.abs(H_s.diagonal())
-            seen = diag > _ZERO_PIVOT * (diag.max() if diag.size else 0.0)
+            seen = _seen_dofs(H_s)
             if not seen.all():
                 logger.debug("level %d: %d of %d spline dofs unseen, held", s,
                              np.count_nonzero(~seen), seen.size)
@@ -188,6 +192,34 @@ class GeometricRegularization:
                                       "no integration point sees spline dof {dof}")
         logger.debug("scale %d -> spline level %d: %d dofs", scale, s, d_s.size)
         return self._transposed[s] @ d_s  # Eq. 21
+
+    def step_covariance(self, H, scale: int):
+        """Covariance of the step per unit noise, ``C_s^T (C_s H C_s^T)^-1 C_s`` (Eq. 21 applied
+        to ``Cov(b) = H``): its diagonal (n_fe,) and its action ``V (n_fe, k) -> C V``."""
+        s = self.level(scale)
+        C, CT = self.operator(s), self._transposed[s]
+        H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
+        seen = _seen_dofs(H_s) if self.hold_unseen else np.ones(H_s.shape[0], dtype=bool)
+        M = np.zeros(H_s.shape)
+        M[np.ix_(seen, seen)] = np.linalg.inv(H_s[seen][:, seen].toarray())   # m x m, m small
+        CT_M = np.asarray(CT @ M)                                               # (n_fe, m)
+        diag = np.asarray(CT.multiply(CT_M).sum(axis=1)).ravel()                # rows of C^T M C
+        return diag, lambda V: CT_M @ (C @ np.asarray(V, dtype=float))
+
+    def bias_step(self, H, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        """The bias indicator: the step of the next finer spline level from the current state,
+        ``C_{s-1}^T (C_{s-1} H C_{s-1}^T)^-1 C_{s-1} b`` (Eqs. 18-21), (n_fe,). At the finest
+        level (``s = 0``) it is the unregularized step ``H^-1 b`` over the dofs a point sees."""
+        s = self.level(scale)
+        if s > 0:
+            finer = dataclasses.replace(self, schedule={scale: s - 1})
+            return finer.solve(H, b, q, scale)
+        H = sps.csr_matrix(H)
+        seen = _seen_dofs(H)
+        d = np.zeros(H.shape[0])
+        if seen.any():
+            d[seen] = spla.spsolve(sps.csc_matrix(H[seen][:, seen]), np.asarray(b, float)[seen])
+        return d
 
     def control_values(self, q: np.ndarray, level: int) -> np.ndarray:
         """Least-squares spline control values of a nodal field, (n_spline_s,).
