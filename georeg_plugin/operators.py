@@ -30,6 +30,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 
+from typing import Sequence
+
 import numpy as np
 import scipy.sparse as sps
 
@@ -40,7 +42,7 @@ from .refine import refine_uniform
 logger = logging.getLogger(__name__)
 
 __all__ = ["extraction_operator", "node_parameters", "MultilevelSpace",
-           "multilevel_space", "NodesOutsidePatchError"]
+           "multilevel_space", "nested_space", "NodesOutsidePatchError"]
 
 
 class NodesOutsidePatchError(ValueError):
@@ -235,7 +237,28 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     for _ in range(int(n_levels) - 1):
         fine, C_r = refine_uniform(patches[-1], 1)  # Eq. 13: R_c = C_r R_f
         patches.append(fine)
-        refinements.append(sps.csr_matrix(C_r))
+        refinements.append(C_r)
+    return nested_space(patches, refinements, nodes, node_normals, uv, glue, family)
+
+
+def nested_space(patches: Sequence[SplinePatch], refinements: Sequence, nodes: np.ndarray,
+                 node_normals: np.ndarray | None = None, uv: np.ndarray | None = None,
+                 glue: bool = True, family: str | None = None) -> MultilevelSpace:
+    """The operators ``C_s`` of any nested sequence of levels (Eqs. 13, 28).
+
+    ``patches`` coarse to fine, each made from the previous by knot insertion with the
+    matrix ``refinements[k]`` (``R_k = C_r R_{k+1}``, Eq. 13; e.g. :func:`refine_uniform`
+    or :func:`~georeg_plugin.refine.insert_knots`, which need not halve the spans: the
+    last level may be the spline of an FE mesh of any number of elements). Other
+    parameters as :func:`multilevel_space`.
+    """
+    patches = list(patches)
+    if len(refinements) != len(patches) - 1:
+        raise ValueError(f"refinements: {len(patches) - 1} matrices expected for {len(patches)} "
+                         f"levels, got {len(refinements)}")
+    if family is not None:
+        check_element_degree(patches[0].degrees, family, "nested_space: coarsest patch")
+    refinements = [sps.csr_matrix(C_r) for C_r in refinements]
     if uv is None:
         uv, _ = node_parameters(patches[-1], nodes)
     operators = [extraction_operator(p, uv, node_normals) for p in reversed(patches)]
@@ -245,7 +268,7 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     if gluing:
         operators = [(G @ C).tocsr() for G, C in zip(gluing, operators)]
         refinements = []
-    logger.info("multilevel space: %d levels, spline dofs %s, %d FE nodes", n_levels,
+    logger.info("multilevel space: %d levels, spline dofs %s, %d FE nodes", len(patches),
                 [C.shape[0] for C in operators], np.asarray(uv).shape[0])
     return MultilevelSpace(patches=tuple(patches), operators=tuple(operators),
                            refinement=tuple(reversed(refinements)), gluing=tuple(gluing))

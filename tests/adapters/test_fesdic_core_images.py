@@ -6,9 +6,8 @@
 - the bias of a FIXED set of coarse spline levels on a feature shorter than their knot spans
   (``bump_scene``: a 0.3 mm Gaussian bump, sigma 2 mm, on a flat 60 x 40 mm plate).
 """
-import pytest
-
 from adapters.fesdic_core import georeg_solver, nominal_model
+from adapters.level_search import measure_auto_levels
 from fesdic_core.driver import MeasurementSettings, measure
 from georeg_plugin.geometries import plate_with_hole, rectangle
 from shape_truth import bounded_shape_error, rms
@@ -34,14 +33,10 @@ def test_nurbs_plate_with_hole_measures_the_twisted_open_hole_plate(small_demo_s
     assert abs(bounded_shape_error(geo.nodes, scene.specimen)).max() < 0.025
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "over-regularization by a FIXED set of coarse levels: with 2 spline levels of the plate "
-    "(finest knot spans 30 x 20 mm) a 0.3 mm bump of sigma 2 mm is not in the spline space; "
-    "georeg flattens it (peak 0.035 mm of 0.29) and its RMS error, 19.0 um, exceeds the "
-    "unregularized FE's 10.8 um on the same 24 x 16 Q9 mesh; an automatic choice of the "
-    "levels (the next work) must remove this bias"))
-def test_georeg_with_fixed_coarse_levels_is_not_worse_than_fe_on_a_short_feature(bump_scene):
-    """Desired: georeg error <= FE error on a shape outside the coarse spline spaces."""
+def test_georeg_with_fixed_coarse_levels_is_worse_than_fe_on_a_short_feature(bump_scene):
+    """The bias that the level search removes: with 2 FIXED spline levels of the plate
+    (finest knot spans 30 x 20 mm) a 0.3 mm bump of sigma 2 mm is not in the spline space;
+    georeg flattens it. Measured: 19.0 um against FE's 10.8 um on the same 24 x 16 Q9 mesh."""
     model = nominal_model(rectangle(60.0, 40.0), (24, 16), "Q9")
     images = bump_scene.images
     settings = MeasurementSettings(scales=(0,))
@@ -49,4 +44,23 @@ def test_georeg_with_fixed_coarse_levels_is_not_worse_than_fe_on_a_short_feature
     fe = measure(model.mesh, images, bump_scene.cameras, None, settings)
     geo_error = rms(bounded_shape_error(geo.nodes, bump_scene.specimen))
     fe_error = rms(bounded_shape_error(fe.nodes, bump_scene.specimen))
+    assert geo_error > 1.5 * fe_error, (geo_error, fe_error)
+    # the verdict (residual <= 3 x the images' noise floor) does not catch this bias (1.68 %
+    # against a 1.9 % floor): only the level search's statistic does, below
+    assert geo.ok
+
+
+def test_automatic_level_is_not_worse_than_fe_on_a_short_feature(bump_scene):
+    """The same start (2 levels), then the level search: it climbs the ladder to the
+    spline of the FE mesh (26 x 18 = 468 dofs) and beats FE. Measured: 6.4 um, FE 10.8 um."""
+    model = nominal_model(rectangle(60.0, 40.0), (24, 16), "Q9")
+    images = bump_scene.images
+    settings = MeasurementSettings(scales=(0,))
+    geo, solver, search = measure_auto_levels(model, images, bump_scene.cameras, settings,
+                                              start_levels=2)
+    fe = measure(model.mesh, images, bump_scene.cameras, None, settings)
+    geo_error = rms(bounded_shape_error(geo.nodes, bump_scene.specimen))
+    fe_error = rms(bounded_shape_error(fe.nodes, bump_scene.specimen))
+    assert geo.ok, geo.failure
+    assert search.chosen < search.start and solver.level(0) == search.chosen
     assert geo_error <= fe_error, (geo_error, fe_error)

@@ -1,0 +1,217 @@
+"""Geometric regularization that chooses its own level: the search, driven through the core.
+
+1. The paper's coarse-to-fine run (section 3.3): image scale ``s`` on spline level
+   ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
+   to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
+2. At the finest image scale, the spline space is enriched one or more knot-insertion
+   levels at a time while Mallows' Cp falls (:mod:`georeg_plugin.selection`): the fall of
+   the gray-level cost to every finer level is predicted from the converged Gauss-Newton
+   system, the best predicted level is iterated from the current solution (the levels are
+   nested, Eq. 13: no restart from scratch), and its measured Cp decides.
+3. If a finer level was chosen, one more fixed point of calibration and shape at that level
+   (the core's :func:`~fesdic_core.driver.measure`, with its verdict and uncertainty).
+
+The noise variance ``kappa`` of Cp is the core's noise model (:mod:`fesdic_core.uncertainty`):
+image noise through the image model, scaled to the residual the FE model leaves.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from typing import Callable, Sequence
+
+import numpy as np
+
+from fesdic_core.driver import Measurement, MeasurementSettings, measure
+from fesdic_core.image import pyramid
+from fesdic_core.shape import shape_gauss_newton
+from fesdic_core.uncertainty import linearised_state
+from fesdic_core.mesh import node_normals
+from georeg_plugin.operators import MultilevelSpace, nested_space
+from georeg_plugin.refine import insert_knots, refine_uniform
+from georeg_plugin.selection import LevelTrial, mallows_cp, noise_gain, predicted_fit
+from georeg_plugin.solver import GeometricRegularization
+
+from .fesdic_core import NominalModel
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["LevelSearch", "ladder", "measure_auto_levels"]
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelSearch:
+    """What the level search did: one :class:`LevelTrial` per level looked at, in order.
+
+    ``chosen``/``start``: level indices in the ladder (0 = the spline of the FE mesh);
+    ``n_levels``: levels in the ladder; ``variance``: the noise variance ``kappa`` of Cp;
+    ``time_s``: the time the search added to the fixed-level run.
+    """
+
+    trials: tuple
+    chosen: int
+    start: int
+    n_levels: int
+    variance: float
+    time_s: float
+
+    def as_dict(self) -> dict:
+        return {"chosen_level": self.chosen, "start_level": self.start, "n_levels": self.n_levels,
+                "noise_variance": self.variance, "time_s": self.time_s,
+                "trials": [dataclasses.asdict(t) for t in self.trials]}
+
+
+def _element_breaks(model: NominalModel) -> tuple[np.ndarray, np.ndarray]:
+    """The knot values (u, v) of the spline the FE mesh is extracted from (its element
+    corners, Eq. 17)."""
+    corners = np.concatenate([b.connectivity[:, :4].ravel() for b in model.mesh.blocks])
+    uv = model.uv[np.unique(corners)]
+    # with the nominal's own breaks: a welded seam node keeps one of its two parameters
+    return tuple(np.unique(np.round(np.concatenate([uv[:, d], model.patch.breaks[d]]), 12))
+                 for d in (0, 1))
+
+
+def _refines(breaks: tuple, fe_breaks: tuple) -> bool:
+    return all(np.all(np.min(np.abs(b[:, None] - f[None, :]), axis=1) < 1e-9)
+               for b, f in zip(breaks, fe_breaks))
+
+
+def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
+    """The nested levels from the nominal spline to the spline of the FE mesh (``C_FE``).
+
+    Dyadic refinements of the nominal spline while the FE elements refine them, then the
+    spline whose knot spans are the FE elements (single knots inserted at the element
+    corners: the levels stay nested, Eq. 13, whatever the number of elements). For a
+    legacy mesh (no node parameters): dyadic levels with at most a quarter as many dofs as
+    the mesh has nodes (a Q9 mesh has about four nodes per spline dof).
+    """
+    patches, refinements = [model.patch], []
+    if model.uv is None:
+        while len(patches) < 12:
+            finer, C_r = refine_uniform(patches[-1], 1)
+            if finer.n_dofs > model.mesh.n_nodes / 4:
+                break
+            patches.append(finer)
+            refinements.append(C_r)
+    else:
+        fe_breaks = _element_breaks(model)
+        while True:
+            finer, C_r = refine_uniform(patches[-1], 1)
+            if not _refines(finer.breaks, fe_breaks) or finer.n_dofs > model.mesh.n_nodes:
+                break
+            patches.append(finer)
+            refinements.append(C_r)
+        new = [f[np.min(np.abs(f[:, None] - b[None, :]), axis=1) > 1e-9]
+               for f, b in zip(fe_breaks, patches[-1].breaks)]
+        if any(n.size for n in new):
+            fe_spline, C_r = insert_knots(patches[-1], new[0], new[1])
+            patches.append(fe_spline)
+            refinements.append(C_r)
+    normals = node_normals(model.mesh) if curved else None
+    family = model.mesh.blocks[0].family.name if model.uv is not None else None
+    return nested_space(patches, refinements, model.mesh.nodes, normals, model.uv, family=family)
+
+
+def _trial(level: int, space: MultilevelSpace, chi_square: float, reference: tuple, variance: float,
+           residual_percent: float, measured: bool) -> LevelTrial:
+    dofs = space.operators[level].shape[0]
+    return LevelTrial(level=level, dofs=dofs, chi_square=chi_square,
+                      cp=mallows_cp(chi_square, dofs, variance), residual_percent=residual_percent,
+                      measured=measured, gain=noise_gain(*reference, chi_square, dofs, variance)
+                      if reference else float("nan"))
+
+
+def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence,
+                        settings: MeasurementSettings, start_levels: int = 3, curved: bool = False,
+                        progress: Callable | None = None
+                        ) -> tuple[Measurement, GeometricRegularization, LevelSearch]:
+    """Measure with the spline level chosen from the data (see the module docstring).
+
+    Parameters
+    ----------
+    model : the nominal spline and FE mesh.
+    images, cameras : the full-resolution stereo pair and the initial cameras.
+    settings : the core's settings (scales, calibration, ...).
+    start_levels : levels of the coarse-to-fine start (the paper's fixed choice): the
+        finest image scale starts on the ladder's level ``start_levels - 1`` counted from
+        the coarse nominal spline.
+    progress : passed to the core's ``measure`` (scales of the start).
+
+    Returns
+    -------
+    (measurement, solver, search): the measurement at the chosen level, the solve hook
+    whose finest scale uses it, and the search's record.
+    """
+    space = ladder(model, curved)
+    n_levels = space.n_levels
+    finest = settings.scales[-1]
+    start = max(0, n_levels - int(start_levels))
+    schedule = {s: min(start + s - finest, n_levels - 1) for s in settings.scales}
+    first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule),
+                    settings, progress=progress)
+    t0 = time.perf_counter()
+    if first.state is None or first.noise is None or not np.all(np.isfinite(first.q)):
+        logger.info("level search skipped: the start has no state to search from")
+        return first, GeometricRegularization(space, schedule), LevelSearch(
+            (), start, start, n_levels, float("nan"), 0.0)
+    kappa = first.noise.variance
+    imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
+    cams = [c.scaled(finest) for c in first.cameras]
+    quad, normals = first.quadrature, first.normals
+
+    def residual_of(chi: float, state) -> float:                 # std scales like sqrt(c)
+        return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
+
+    level, q, state = start, first.q, first.state
+    current = _trial(level, space, state.chi_square, (), kappa, state.residual.std_percent, True)
+    trials = [current]
+    iterations = 0
+    while level > 0:
+        reference = (current.chi_square, current.dofs)
+        predictions = []
+        for finer in range(level - 1, -1, -1):
+            step = GeometricRegularization(space, {finest: finer}).solve(state.H, state.b, q, finest)
+            chi = predicted_fit(state.chi_square, state.b, step)
+            predictions.append(_trial(finer, space, chi, reference, kappa,
+                                      residual_of(chi, state), False))
+        trials += predictions
+        best = min(predictions, key=lambda t: t.cp)
+        logger.info("level search: level %d (%d dofs) Cp %.6g; best predicted: level %d (%d dofs) "
+                    "Cp %.6g, gain %.3g kappa per dof", level, current.dofs, current.cp, best.level,
+                    best.dofs, best.cp, best.gain)
+        if best.cp >= current.cp:
+            break
+        solver = GeometricRegularization(space, {finest: best.level})
+        shape = shape_gauss_newton(model.mesh.nodes, normals, q, quad, imgs, cams, solver, finest,
+                                   settings.normalisation, settings.max_iter,
+                                   settings.tol_mm * 2.0 ** finest)
+        iterations += shape.iterations
+        trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
+                                       settings.normalisation)
+        measured = _trial(best.level, space, trial_state.chi_square, reference, kappa,
+                          trial_state.residual.std_percent, True)
+        trials.append(measured)
+        logger.info("level search: level %d measured: residual %.4f%%, Cp %.6g, gain %.3g", best.level,
+                    measured.residual_percent, measured.cp, measured.gain)
+        if measured.cp >= current.cp:
+            break
+        level, q, state, current = best.level, shape.q, trial_state, measured
+    solver = GeometricRegularization(space, {finest: level})
+    if level != start:
+        final = measure(model.mesh, images, first.cameras, solver,
+                        dataclasses.replace(settings, scales=(finest,)), q0=q)
+        final = dataclasses.replace(final, history=first.history + final.history,
+                                    iterations=first.iterations + iterations + final.iterations,
+                                    time_s=first.time_s + (time.perf_counter() - t0),
+                                    scales=first.scales[:-1] + final.scales)
+    else:
+        final = dataclasses.replace(first, time_s=first.time_s + (time.perf_counter() - t0))
+        solver = GeometricRegularization(space, schedule)
+    trials = [dataclasses.replace(t, chosen=t.measured and t.level == level
+                                  and t.chi_square == current.chi_square) for t in trials]
+    search = LevelSearch(tuple(trials), level, start, n_levels, kappa,
+                         final.time_s - first.time_s)
+    logger.info("level search: chose level %d of %d (%d spline dofs; started on level %d), +%.2f s",
+                level, n_levels, space.operators[level].shape[0], start, search.time_s)
+    return final, solver, search
