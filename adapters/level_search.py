@@ -57,7 +57,9 @@ class LevelSearch:
     time_s: float
 
     def as_dict(self) -> dict:
-        return {"chosen_level": self.chosen, "start_level": self.start, "n_levels": self.n_levels,
+        chosen = [t.dofs for t in self.trials if t.chosen]
+        return {"chosen_level": self.chosen, "chosen_dofs": chosen[0] if chosen else None,
+                "start_level": self.start, "n_levels": self.n_levels,
                 "noise_variance": self.variance, "time_s": self.time_s,
                 "trials": [dataclasses.asdict(t) for t in self.trials]}
 

@@ -196,9 +196,9 @@ def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsy
             raise SingularSystemError("H_FE is numerically singular (test)")
 
     real_solver = pipeline._solver
-    monkeypatch.setattr(pipeline, "_solver", lambda spec, model, levels: Broken()
+    monkeypatch.setattr(pipeline, "_solver", lambda spec, model: Broken()
                         if spec.name == "tikhonov" and spec.param == 10.0
-                        else real_solver(spec, model, levels))
+                        else real_solver(spec, model))
     folder = case[0]
     out = tmp_path / "out"
     assert cli.main(["-q", "compare", str(_config(folder)), "--out", str(out)]) == 0
