@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-import fesdic_core.solvers as solvers
 from fesdic_core.driver import MeasurementSettings, measure
 from fesdic_core.image import Image
 from fesdic_core.mesh import nodal_areas, rectangle_mesh
@@ -30,15 +29,16 @@ def test_inverse_covariance_is_the_inverse():
     np.testing.assert_allclose(apply(V), inverse @ V, rtol=1e-9, atol=1e-12)
 
 
-def test_inverse_covariance_probing_path(monkeypatch):
-    """Above DENSE_LIMIT the diagonal is probed: within 20 % for a diagonally dominant H."""
-    monkeypatch.setattr(solvers, "DENSE_LIMIT", 10)
-    H = sps.diags([np.full(199, -0.2), np.linspace(1.0, 3.0, 200), np.full(199, -0.2)], [-1, 0, 1]).tocsr()
-    diag, apply = inverse_covariance(H)
-    exact = np.diag(np.linalg.inv(H.toarray()))
-    assert np.max(np.abs(diag / exact - 1.0)) < 0.2
-    v = np.ones((200, 1))
-    np.testing.assert_allclose(apply(v), np.linalg.solve(H.toarray(), v), rtol=1e-9)
+def test_inverse_diagonal_of_an_fe_matrix_matches_the_dense_inverse():
+    """Takahashi's recurrence on the banded (RCM) Cholesky factor of a Q9 mesh's matrix."""
+    from fesdic_core.solvers import inverse_diagonal
+    from fesdic_core.tikhonov import surface_gradient_operator
+    mesh = rectangle_mesh(40.0, 20.0, 10, 5, family="Q9")
+    H = sps.csr_matrix(surface_gradient_operator(mesh) + 0.05 * sps.identity(mesh.n_nodes))
+    rng = np.random.default_rng(2)
+    shuffle = rng.permutation(mesh.n_nodes)               # a bad numbering: RCM must fix it
+    H = H[shuffle][:, shuffle]
+    np.testing.assert_allclose(inverse_diagonal(H), np.diag(np.linalg.inv(H.toarray())), rtol=1e-9)
 
 
 def test_shape_std_projects_out_the_rigid_modes():
