@@ -41,6 +41,10 @@ from .tikhonov_choice import CpCurve, covariance_diagonal, length_grid, mallows_
 
 logger = logging.getLogger(__name__)
 
+#: a cosine probe whose ``v^T A v`` is below this fraction of ``|v|^T |A| |v|`` has no
+#: gradient (round-off)
+_ROUND_OFF = 1e-9
+
 
 def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
     """Assemble ``A`` with ``q^T A q = int |grad_s (L^T q)|^2 dX`` (the operator of Eq. 10).
@@ -65,17 +69,25 @@ def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
 
 
 def tikhonov_weight(H: sps.spmatrix, A: sps.spmatrix, nodes: np.ndarray, length_mm: float) -> float:
-    """``lam`` such that a cosine of wavelength ``length_mm`` costs the same in H and lam A."""
+    """``lam`` such that a cosine of wavelength ``length_mm`` costs the same in H and lam A.
+
+    A direction in which the probe has no gradient at the nodes (``v^T A v`` at round-off
+    level, e.g. a wavelength that divides the node spacing: the cosine aliases to a
+    constant) is left out; ValueError if both are.
+    """
     centred = nodes - nodes.mean(axis=0)
     _, _, axes = np.linalg.svd(centred, full_matrices=False)
     ratios = []
+    absA = abs(A)
     for e in axes[:2]:
         v = np.cos(2.0 * np.pi * (centred @ e) / length_mm)
         vAv = float(v @ (A @ v))
-        if vAv > 0:
+        if vAv > _ROUND_OFF * float(np.abs(v) @ (absA @ np.abs(v))):
             ratios.append(float(v @ (H @ v)) / vAv)
     if not ratios:
-        raise ValueError(f"tikhonov length {length_mm} mm: the cosine probe has no gradient")
+        raise ValueError(f"tikhonov length {length_mm:g} mm: the cosine probe has no gradient at "
+                         "the nodes of this mesh (a wavelength shorter than twice the node "
+                         "spacing aliases), so it gives no regularization weight")
     return float(np.mean(ratios))
 
 
@@ -133,6 +145,9 @@ class TikhonovSolver:
         self.nodes = mesh.nodes
         self.A = surface_gradient_operator(mesh)
         self.auto = self.length_mm == "auto"
+        if not self.auto:                   # fail now if scale 0's cosine probe aliases
+            tikhonov_weight(sps.identity(mesh.n_nodes, format="csr"), self.A, self.nodes,
+                            self.length_mm)
         self.grid_mm = length_grid(mesh) if self.auto else None
         self.lambdas: dict[int, float] = {}
         self.chosen_lengths_mm: dict[int, float] = {}

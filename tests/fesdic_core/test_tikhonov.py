@@ -359,3 +359,17 @@ def test_choice_is_logged_per_scale(caplog):
         assert f"scale {s}" in line and f"{solver.chosen_lengths_mm[s]:.4g} mm" in line
         assert f"lambda {solver.lambdas[s]:.4g}" in line
 
+
+def test_a_length_the_nodes_cannot_resolve_is_refused():
+    """A 5 mm wavelength on nodes 5 mm apart is a constant at the nodes (v^T A v is round-off):
+    no weight, instead of the 1e17 the round-off used to give. 10 mm (twice the spacing) is
+    resolved."""
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q9")             # nodes 5 mm apart
+    A = surface_gradient_operator(mesh)
+    H = sps.identity(mesh.n_nodes, format="csr")
+    with pytest.raises(ValueError, match="5 mm: the cosine probe has no gradient"):
+        tikhonov_weight(H, A, mesh.nodes, 5.0)
+    with pytest.raises(ValueError, match="twice the node spacing"):
+        TikhonovSolver(mesh, 5.0)
+    assert 0.0 < tikhonov_weight(H, A, mesh.nodes, 10.0) < 1e3
+    TikhonovSolver(mesh, 10.0)
