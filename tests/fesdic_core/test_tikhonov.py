@@ -215,7 +215,8 @@ def _grid_errors(H, b, A, lambdas, truth):
 def test_auto_length_is_close_to_the_oracle(seed, trace, monkeypatch):
     """Known truth and noise: the Cp choice's error is within 1.5 x the best error over the
     grid (the oracle, which knows the truth) and far below the unregularized one.
-    Measured (exact trace): 1.00-1.19 x the oracle, 0.2 x the FE error."""
+    Measured over seeds 0-19: 1.00-1.30 x the oracle (median 1.06), at most 0.24 x the FE
+    error; the Hutchinson trace chose the same lengths as the exact one."""
     if trace == "hutchinson":
         monkeypatch.setattr(tikhonov_choice, "DENSE_CP_MAX_DOFS", 0)
     mesh, H, b, truth, kappa, _ = _linear_problem(seed=seed)
