@@ -33,6 +33,7 @@ import logging
 
 import numpy as np
 import scipy.sparse as sps
+import scipy.sparse.linalg as spla
 
 from .elements import gauss_rule
 from .mesh import SurfaceMesh, assemble
@@ -235,6 +236,15 @@ class TikhonovSolver:
         the columns of ``G`` by blocks above (:func:`tikhonov_choice.covariance_diagonal`).
         """
         return covariance_diagonal(H, self.A, self._lambda(int(scale)))
+
+    def step_covariance(self, H: sps.spmatrix, scale: int):
+        """The step's covariance per unit noise for :func:`fesdic_core.uncertainty.shape_std`:
+        ``diag(G H G)`` (:meth:`covariance_diagonal`) and its action ``V -> G H G V``."""
+        K = sps.csc_matrix(H + self._lambda(int(scale)) * self.A)
+        lu = spla.splu(K)
+        H = sps.csr_matrix(H)
+        return (self.covariance_diagonal(H, scale),
+                lambda V: lu.solve(np.asarray(H @ lu.solve(np.asarray(V, dtype=float)))))
 
     def bias_step(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         """How much the shape would move with the regularization one notch weaker.

@@ -85,3 +85,24 @@ def test_predicted_std_matches_the_spread_over_noise_draws(noisy_bump_pairs):
     empirical = np.std(qs, axis=0, ddof=1)
     ratio = np.median(np.median(stds, axis=0) / empirical)
     assert 0.8 <= ratio <= 1.3, ratio
+
+
+def test_tikhonov_step_covariance_with_the_gauge_projection():
+    """shape_std through TikhonovSolver.step_covariance against the dense
+    P G H G P^T, G = (H + lam A)^-1 (its weight chosen by a first solve of scale 0)."""
+    from fesdic_core.tikhonov import TikhonovSolver
+    mesh = rectangle_mesh(30.0, 20.0, 4, 3, family="Q9")
+    n = mesh.n_nodes
+    H, rng = _spd(n, seed=5)
+    solver = TikhonovSolver(mesh, 12.0)
+    solver.solve(H, rng.standard_normal(n), np.zeros(n), 0)
+    normals = np.tile([0.0, 0.0, 1.0], (n, 1))
+    modes, _ = rigid_normal_modes(mesh.nodes, normals)
+    w = nodal_areas(mesh)
+    std = shape_std(H, 0.5, solver, 0, modes, w)
+    G = np.linalg.inv(H.toarray() + solver.lambdas[0] * solver.A.toarray())
+    C = 0.5 * G @ H.toarray() @ G
+    keep = modes[:, [2, 3, 4]]
+    W = np.diag(w)
+    P = np.eye(n) - keep @ np.linalg.solve(keep.T @ W @ keep, keep.T @ W)
+    np.testing.assert_allclose(std, np.sqrt(np.diag(P @ C @ P.T)), rtol=1e-8)
