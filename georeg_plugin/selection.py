@@ -43,6 +43,7 @@ class LevelTrial:
         dof, in units of ``kappa`` (Cp prefers the finer level when it exceeds 2; noise
         alone gives about 1). NaN for the starting level.
     chosen : the level the search ended on.
+    variance : the noise variance ``kappa`` of ``cp`` and ``gain``.
     """
 
     level: int
@@ -53,6 +54,7 @@ class LevelTrial:
     measured: bool
     gain: float = float("nan")
     chosen: bool = False
+    variance: float = float("nan")
 
 
 def mallows_cp(chi_square: float, dofs: int, variance: float) -> float:
