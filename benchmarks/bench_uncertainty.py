@@ -41,13 +41,9 @@ level (``--level``, default the 16-dof level: 2 x 2 knot spans), Tikhonov at a f
 length (``--tikhonov-mm``, 10 mm), and Tikhonov "auto" when ``TikhonovSolver(mesh,
 "auto")`` constructs. All at image scale 0 only.
 
-``TikhonovSolver`` has no ``step_covariance``/``bias_step`` hook, so the core reports no
-uncertainty for it. The script then computes them itself, from the core's noise model
-(``m.noise.variance``) and converged state (``m.state``), as the uncertainty module's
-docstring defines them: covariance ``kappa G H G^T`` with ``G = (H + lam A)^-1`` (Eq. 10,
-``lam`` from the final ``H``), projected out of the rigid normal modes when calibrating
-(:func:`fesdic_core.uncertainty.shape_std`); bias indicator: the step of Tikhonov with
-half the length from the converged state. Such rows are marked ``*``.
+Every method reports its std and bias indicator through the core's hooks
+(``step_covariance``, ``bias_step``; Tikhonov's bias indicator is the step of half the
+length from the converged state).
 
 What is compared (per scene, method, calibration). ``q_k`` is the shape of seed ``k``;
 with calibration every nodal field below is first taken modulo the rigid normal modes
@@ -123,19 +119,18 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-import scipy.linalg as sla
 
 from adapters.fesdic_core import nominal_model
 from adapters.level_search import ladder, measure_auto_levels
 from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.gauge import rigid_normal_modes, split_rigid_part
+from fesdic_core.gauge import split_rigid_part
 from fesdic_core.image import Image
 from fesdic_core.mesh import nodal_areas
 from fesdic_core.render import (demo_cameras, render_stereo, speckle_mm_for, true_normal_offset,
                                 twisted_plate)
 from fesdic_core.shape import current_nodes
-from fesdic_core.tikhonov import TikhonovSolver, tikhonov_weight
-from fesdic_core.uncertainty import noise_model, shape_std
+from fesdic_core.tikhonov import TikhonovSolver
+from fesdic_core.uncertainty import noise_model
 from georeg_plugin.geometries import rectangle
 from georeg_plugin.solver import GeometricRegularization
 
@@ -216,30 +211,6 @@ def build(args) -> Setup:
                  methods, why)
 
 
-# ----------------------------------------------------------------------------- Tikhonov hooks
-class TikhonovCovariance:
-    """``step_covariance`` of Tikhonov (Eq. 10) computed here: ``G H G^T``, ``G = (H + lam A)^-1``."""
-
-    def __init__(self, solver: TikhonovSolver):
-        self.solver = solver
-
-    def step_covariance(self, H, scale: int):
-        lam = tikhonov_weight(H, self.solver.A, self.solver.nodes, self.solver.length_mm)
-        K = (H + lam * self.solver.A).toarray()
-        G = sla.cho_solve(sla.cho_factor(K, check_finite=False), np.eye(K.shape[0]),
-                          check_finite=False)
-        C = G @ (H @ G)
-        return np.diag(C).copy(), lambda V: C @ np.asarray(V, dtype=float)
-
-
-def tikhonov_bias_step(solver: TikhonovSolver, H, b: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """One notch less Tikhonov: the step of half the length from the converged state."""
-    lam = tikhonov_weight(H, solver.A, solver.nodes, 0.5 * solver.length_mm)
-    K = (H + lam * solver.A).toarray()
-    return sla.cho_solve(sla.cho_factor(K, check_finite=False), b - lam * (solver.A @ q),
-                         check_finite=False)
-
-
 # ----------------------------------------------------------------------------- one measurement
 def measure_one(setup: Setup, method: str, images, calibrate: bool) -> dict:
     args, model = setup.args, setup.model
@@ -259,16 +230,7 @@ def measure_one(setup: Setup, method: str, images, calibrate: bool) -> dict:
         solver = TikhonovSolver(model.mesh, "auto" if method.endswith("auto") else args.tikhonov_mm)
         m = measure(model.mesh, images, setup.cameras, solver, settings)
     wall = time.perf_counter() - t0
-    std, bias, own = m.shape_std_mm, m.shape_bias_mm, True
-    if isinstance(solver, TikhonovSolver) and m.state is not None:
-        if std is None:
-            modes = rigid_normal_modes(model.mesh.nodes, m.normals)[0] if calibrate else None
-            std = shape_std(m.state.H, m.noise.variance, TikhonovCovariance(solver), 0, modes,
-                            setup.weights)
-            own = False
-        if bias is None:
-            bias = np.abs(tikhonov_bias_step(solver, m.state.H, m.state.b, m.q))
-            own = False
+    std, bias = m.shape_std_mm, m.shape_bias_mm
     kappa_known = float("nan")
     if m.state is not None and m.noise is not None:
         # kappa of white noise of exactly the added sigma, through the same image model
@@ -277,7 +239,7 @@ def measure_one(setup: Setup, method: str, images, calibrate: bool) -> dict:
         known = noise_model(m.state, X, m.quadrature, images, list(m.cameras), m.normals,
                             (sigma, sigma), 0, settings.normalisation, None, draws=2, seed=7)
         kappa_known = known.variance_images
-    return dict(q=m.q, std=std, bias=bias, ok=m.ok, time=wall, level=level, own=own,
+    return dict(q=m.q, std=std, bias=bias, ok=m.ok, time=wall, level=level,
                 kappa=m.noise.variance if m.noise is not None else float("nan"),
                 kappa_known=kappa_known)
 
@@ -333,7 +295,6 @@ def summarise(setup: Setup, key, runs: list, clean_run) -> dict:
     row.update(emp=np.mean(emp), bias=np.mean(np.abs(mean_bias)),
                bias_noise=np.sqrt(2.0 / np.pi * np.mean(emp ** 2) / len(good)),
                rms=np.sqrt(np.mean(err ** 2)), time=np.median([r["time"] for r in good]),
-               own=all(r["own"] for r in good),
                k_k2=np.median([r["kappa"] / r["kappa_known"] for r in good]))
     levels = [r["level"] for r in good if r["level"] is not None]
     if levels:
@@ -376,8 +337,6 @@ def format_row(row: dict) -> str:
             text = "-"
         else:
             text = fmt.format(1e3 * value if key in MICRONS else value)
-        if key == "method" and row.get("own") is False:
-            text += "*"
         if key == "ok":
             text = f"{row['ok']}/{row['n']}"
         cells.append(text.rjust(width) if key not in ("scene", "method") else text.ljust(width))
@@ -464,8 +423,7 @@ def report(setup: Setup, results: dict, total: float) -> None:
                 key = (scene, method, calibrate)
                 runs = [results[s][key] for s in range(args.seeds)]
                 print(format_row(summarise(setup, key, runs, results[None][key])), flush=True)
-    print("um: std, emp, bias, (+-), |bi|, rms, err0. * = std and bias indicator computed by this "
-          "script (the solver has no step_covariance / bias_step hook).")
+    print("um: std, emp, bias, (+-), |bi|, rms, err0.")
     count = (args.seeds + 1) * len(setup.clean) * len(setup.methods) * len(args.calibrate)
     print(f"total {total:.0f} s for {count} measurements")
 
