@@ -36,8 +36,8 @@ A complete example (every key; optional keys show their default in parentheses):
 
     [method]                      # optional section
     name = "georeg"               # "fe" | "tikhonov" | "georeg"       (default "georeg")
-    levels = "auto"               # georeg spline levels: "auto" (chosen from the data by
-                                  # Mallows' Cp, README "Level choice") or an integer
+    levels = "auto"               # georeg spline levels: "auto" (chosen from the data by an
+                                  # information criterion, README "Level choice") or an integer
                                   # (the paper's fixed levels)          (default "auto")
     start_levels = 3              # levels of the coarse-to-fine start of "auto" (default 3)
     scales = 3                    # image scales, coarse to fine       (default 3)

@@ -194,7 +194,8 @@ def _chosen(result) -> str:
 
 def level_search_html(run) -> str:
     """Per georeg method with automatic levels: the levels looked at, their dofs, residual,
-    Mallows' Cp and the statistic (gain per added dof in units of the noise variance)."""
+    information criterion (BIC) and the statistic (gain per added dof in units of the noise
+    variance)."""
     parts = []
     for r in run.results:
         search = getattr(r, "level_search", None)
@@ -202,15 +203,16 @@ def level_search_html(run) -> str:
             continue
         rows = "".join(
             f"<tr><td>{t.level}</td><td>{t.dofs}</td><td>{'measured' if t.measured else 'predicted'}"
-            f"</td><td>{_f(t.residual_percent)}</td><td>{_f(t.cp, 7)}</td><td>{_f(t.gain, 3)}</td>"
+            f"</td><td>{_f(t.residual_percent)}</td><td>{_f(t.criterion, 7)}</td><td>{_f(t.gain, 3)}</td>"
             f"<td>{'chosen' if t.chosen else ''}</td></tr>" for t in search.trials)
         parts.append(
             f"<h3>{html.escape(r.spec.label)}: level search</h3><p>Levels of the ladder "
             f"{search.n_levels} (0 = the spline of the FE mesh), start {search.start}, chosen "
             f"{search.chosen}; noise variance kappa {_f(search.variance)}; added time "
-            f"{_f(search.time_s, 3)} s. A finer level is taken when it lowers Mallows' Cp, i.e. "
-            "when its fall of the cost per added dof exceeds 2 kappa (noise alone: about 1).</p>"
-            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>Cp</th>"
+            f"{_f(search.time_s, 3)} s. A finer level is taken when it lowers the Bayesian "
+            "information criterion, i.e. when its fall of the cost per added dof exceeds ln N "
+            "times the noise variance (N integration points; noise alone gives about 1).</p>"
+            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>BIC</th>"
             f"<th>gain per dof (kappa)</th><th></th></tr>{rows}</table>")
     return "".join(parts)
 

@@ -6,7 +6,7 @@ import scipy.sparse as sps
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
 from adapters.level_search import ladder
 from georeg_plugin.geometries import plate_with_hole, rectangle
-from georeg_plugin.selection import mallows_cp, noise_gain, predicted_fit
+from georeg_plugin.selection import information_criterion, noise_gain, predicted_fit
 from georeg_plugin.solver import GeometricRegularization
 
 
@@ -54,15 +54,15 @@ def test_predicted_fit_is_exact_for_a_linear_problem():
         assert predicted_fit(c, b, d) == pytest.approx(float(np.sum((r + Phi.T @ d) ** 2)), rel=1e-10)
 
 
-def test_cp_and_gain():
-    assert mallows_cp(10.0, 5, 0.5) == 15.0
+def test_criterion_and_gain():
+    assert information_criterion(10.0, 5, 0.5, 1000) == pytest.approx(10.0 + 2.5 * np.log(1000))
     assert noise_gain(10.0, 4, 7.0, 7, 0.5) == pytest.approx(2.0)      # (10 - 7) / (0.5 * 3)
     assert np.isnan(noise_gain(10.0, 4, 7.0, 4, 0.5))
 
 
-def test_noise_alone_rarely_passes_the_cp_test():
+def test_noise_alone_never_passes_the_criterion():
     """Pure noise of variance kappa on a linear problem: the gain per added dof is ~1, so
-    Cp keeps the coarse level (2 is the threshold) in most draws."""
+    the criterion (threshold ln N = 8 here) keeps the coarse level in every draw."""
     model = nominal_model(rectangle(30.0, 20.0), (8, 8), "Q9")
     space = ladder(model)
     rng = np.random.default_rng(1)
@@ -79,6 +79,6 @@ def test_noise_alone_rarely_passes_the_cp_test():
         c0, c1 = predicted_fit(c, b, coarse), predicted_fit(c, b, fine)
         m0, m1 = space.operators[-2].shape[0], space.operators[-3].shape[0]
         gains.append(noise_gain(c0, m0, c1, m1, 1.0))
-        kept += mallows_cp(c0, m0, 1.0) <= mallows_cp(c1, m1, 1.0)
+        kept += information_criterion(c0, m0, 1.0, 3000) <= information_criterion(c1, m1, 1.0, 3000)
     assert 0.7 < np.mean(gains) < 1.3
-    assert kept >= 36
+    assert kept == 40
