@@ -47,6 +47,9 @@ A complete example (every key; optional keys show their default in parentheses):
     keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
     max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
+    prefilter_px = 0.0            # image model: Gaussian prefilter sigma (px) before the
+                                  # cubic B-spline, >= 0, 0 = none (default: the core's
+                                  # fesdic_core.image.DEFAULT_PREFILTER_PX)
 
     [output]                      # optional section
     dir = "georeg_out"            # output folder (default "georeg_out"; `--out` overrides)
@@ -62,6 +65,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from fesdic_core.image import DEFAULT_PREFILTER_PX
 
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
                           existing_file, integer, load_toml, number, numbers, resolve_path,
@@ -150,6 +155,7 @@ class MethodConfig:
     keep_stereo: bool = True
     normalisation: str = "element"
     max_fixed_point: int = 10
+    prefilter_px: float = DEFAULT_PREFILTER_PX
 
     @property
     def fixed_levels(self) -> int:
@@ -273,7 +279,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
         calibrate=t.take("calibrate", boolean, "true or false", default=d.calibrate),
         keep_stereo=t.take("keep_stereo", boolean, "true or false", default=d.keep_stereo),
         normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
-        max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point))
+        max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point),
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px))
     t.finish()
     check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
     check(t, "levels", m.levels, m.levels == AUTO or m.levels >= 1, '>= 1 or "auto"')
@@ -284,6 +291,7 @@ def _method(data: Any, source: Path) -> MethodConfig:
     check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
+    check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     return m
 
 

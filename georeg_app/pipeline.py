@@ -323,7 +323,8 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     """
     started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     if images is None:
-        images = (read_image(config.images.cam0), read_image(config.images.cam1))
+        images = tuple(read_image(path, prefilter_px=config.method.prefilter_px)
+                       for path in (config.images.cam0, config.images.cam1))
     check_sizes(config, images)
     cameras = load_cameras(config.cameras, images)
     method = config.method
