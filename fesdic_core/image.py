@@ -223,11 +223,6 @@ class Image:
         """
         return Image.from_array(values, self.source, prefilter_px=self.prefilter_px)
 
-    def with_values(self, values: np.ndarray) -> "Image":
-        """An image of new raw pixel values under the same image model and source (e.g.
-        the values plus simulated noise, :mod:`fesdic_core.uncertainty`)."""
-        return Image.from_array(values, self.source)
-
     def __repr__(self) -> str:
         h, w = self.values.shape
         return (f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g}, "

@@ -47,8 +47,8 @@ A complete example (every key; optional keys show their default in parentheses):
     keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
     max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
-    prefilter_px = 0.0            # image model: Gaussian prefilter sigma (px) before the
-                                  # cubic B-spline, >= 0, 0 = none (default: the core's
+    prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
+                                  # cubic B-spline, >= 0, 0 = none (default 0.5, the core's
                                   # fesdic_core.image.DEFAULT_PREFILTER_PX)
 
     [output]                      # optional section

@@ -83,6 +83,21 @@ def test_single_tikhonov_length_and_default_sections(tmp_path):
     assert c.output.dir == tmp_path / config_module.DEFAULT_OUTPUT_DIR
 
 
+def test_automatic_levels_and_tikhonov_length(tmp_path):
+    """levels = "auto" (the default) starts from start_levels fixed levels; "auto" can stand
+    among the Tikhonov lengths; the methods of compare follow."""
+    from georeg_app.methods import default_specs
+    text = GOOD.split("[method]")[0] + ('[method]\nlevels = "auto"\nstart_levels = 2\n'
+                                        'tikhonov_length_mm = [5, "auto"]\n')
+    c = load_config(_write(tmp_path, text))
+    assert c.method.levels == "auto" and c.method.fixed_levels == 2
+    assert c.method.tikhonov_length_mm == (5.0, "auto")
+    labels = [s.label for s in default_specs(c)]
+    assert labels == ["FE (multiscale)", "Tikhonov 5 mm", "Tikhonov auto", "georeg auto (multiscale)",
+                      "georeg 2 levels (multiscale)", "georeg 2 levels (monoscale)"]
+    assert config_module.MethodConfig().levels == "auto"
+
+
 @pytest.mark.parametrize("old, new, expected", [
     ("hole_radius_mm = 14.0", "radius = 14.0",
      "[geometry] radius: unknown key (did you mean hole_radius_mm?)"),
