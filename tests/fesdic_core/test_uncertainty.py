@@ -67,12 +67,15 @@ def noisy_bump_pairs():
 
 
 def test_predicted_std_matches_the_spread_over_noise_draws(noisy_bump_pairs):
-    """FE on a 12 x 8 Q9 mesh, 8 draws of 2 gray levels of noise: the median over the nodes of
-    predicted / empirical std lies in [0.8, 1.3] (the empirical std of 8 draws is itself
-    ~25 % uncertain per node; the median over 475 nodes is not). A prediction from the
-    images' Immerkaer sigma alone would be about 2 times too large on this 4 px speckle."""
+    """FE on a 12 x 8 Q9 mesh 2 mm inside the plate's edges, 8 draws of 2 gray levels of
+    noise: the median over the nodes of predicted / empirical std lies in [0.8, 1.3] (the
+    empirical std of 8 draws is itself ~25 % uncertain per node; the median over 425 nodes
+    is not). A prediction from the images' Immerkaer sigma alone would be about 2 times too
+    large on this 4 px speckle. (A mesh that reaches the plate's edge takes background
+    pixels into its boundary elements, a misfit that the noise model counts as noise: the
+    ratio then rises to about 1.3, benchmarks/bench_uncertainty.py --margin-mm 0.)"""
     cameras, clean = noisy_bump_pairs
-    mesh = rectangle_mesh(60.0, 40.0, 12, 8, family="Q9")
+    mesh = rectangle_mesh(56.0, 36.0, 12, 8, family="Q9")
     qs, stds = [], []
     for seed in range(8):
         rng = np.random.default_rng(100 + seed)
