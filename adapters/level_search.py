@@ -5,11 +5,11 @@
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
 2. At the finest image scale, the spline space is enriched while the Bayesian information
    criterion falls (:mod:`georeg_plugin.selection`): the fall of the gray-level cost to
-   every finer level is predicted from the converged Gauss-Newton system; the coarsest
-   level predicted to lower the criterion (the next one, or a finer one if only a finer
-   one holds a feature: the search looks ahead and does not stop on a level that adds too
-   little) is iterated from the current solution (the levels are nested, Eq. 13: no
-   restart from scratch), and its measured criterion decides.
+   every finer level is predicted from the converged Gauss-Newton system (the search looks
+   ahead: it does not stop on a level that adds too little when a finer one holds a
+   feature); the level of lowest predicted criterion is iterated from the current solution
+   (the levels are nested, Eq. 13: no restart from scratch), its measured criterion
+   decides, and the prediction is renewed from there.
 3. If a finer level was chosen, one more fixed point of calibration and shape at that level
    (the core's :func:`~fesdic_core.driver.measure`, with its verdict and uncertainty).
 
@@ -81,19 +81,28 @@ def _element_breaks(model: NominalModel) -> tuple[np.ndarray, np.ndarray]:
                  for d in (0, 1))
 
 
-def _refines(breaks: tuple, fe_breaks: tuple) -> bool:
-    return all(np.all(np.min(np.abs(b[:, None] - f[None, :]), axis=1) < 1e-9)
-               for b, f in zip(breaks, fe_breaks))
+def _missing(breaks: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """The values of ``breaks`` that are not in ``present`` (to 1e-9)."""
+    if not present.size:
+        return breaks
+    return breaks[np.min(np.abs(breaks[:, None] - present[None, :]), axis=1) > 1e-9]
+
+
+def _halved(breaks: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Every other break, the ends and the breaks of ``keep`` (the nominal's) kept."""
+    return np.unique(np.round(np.concatenate([breaks[::2], breaks[-1:], keep]), 12))
 
 
 def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
     """The nested levels from the nominal spline to the spline of the FE mesh (``C_FE``).
 
-    Dyadic refinements of the nominal spline while the FE elements refine them, then the
-    spline whose knot spans are the FE elements (single knots inserted at the element
-    corners: the levels stay nested, Eq. 13, whatever the number of elements). For a
-    legacy mesh (no node parameters): dyadic levels with at most a quarter as many dofs as
-    the mesh has nodes (a Q9 mesh has about four nodes per spline dof).
+    From the spline whose knot spans are the FE elements (Eq. 17) down: each coarser level
+    keeps every other knot (and the nominal's own knots), until the nominal spline is
+    reached; single knots are inserted from level to level, so the levels are nested
+    (Eq. 13) whatever the number of elements (a dyadic mesh gives the paper's levels of
+    Eq. 28; 40 elements give 40, 20, 10, 5 spans and the nominal). For a legacy mesh (no
+    node parameters): dyadic refinements of the nominal with at most a quarter as many
+    dofs as the mesh has nodes (a Q9 mesh has about four nodes per spline dof).
     """
     patches, refinements = [model.patch], []
     if model.uv is None:
@@ -104,19 +113,19 @@ def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
             patches.append(finer)
             refinements.append(C_r)
     else:
-        fe_breaks = _element_breaks(model)
-        while True:
-            finer, C_r = refine_uniform(patches[-1], 1)
-            if not _refines(finer.breaks, fe_breaks) or finer.n_dofs > model.mesh.n_nodes:
+        nominal = model.patch.breaks
+        chain = [_element_breaks(model)]                          # finest first
+        while any(_missing(b, n).size for b, n in zip(chain[-1], nominal)):
+            coarser = tuple(_halved(b, n) for b, n in zip(chain[-1], nominal))
+            if all(c.size == b.size for c, b in zip(coarser, chain[-1])):
                 break
-            patches.append(finer)
-            refinements.append(C_r)
-        new = [f[np.min(np.abs(f[:, None] - b[None, :]), axis=1) > 1e-9]
-               for f, b in zip(fe_breaks, patches[-1].breaks)]
-        if any(n.size for n in new):
-            fe_spline, C_r = insert_knots(patches[-1], new[0], new[1])
-            patches.append(fe_spline)
-            refinements.append(C_r)
+            chain.append(coarser)
+        for breaks in reversed(chain):
+            new = [_missing(b, p) for b, p in zip(breaks, patches[-1].breaks)]
+            if any(n.size for n in new):
+                finer, C_r = insert_knots(patches[-1], new[0], new[1])
+                patches.append(finer)
+                refinements.append(C_r)
     normals = node_normals(model.mesh) if curved else None
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
     return nested_space(patches, refinements, model.mesh.nodes, normals, model.uv, family=family)
@@ -223,7 +232,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                     np.log(state.n_points), variance, variance / kappa)
         if not better:
             break
-        best = better[0]        # the coarsest level predicted better: one step at a time
+        best = min(better, key=lambda t: t.criterion)              # the best predicted level
         solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q, quad, imgs, cams, solver, finest,
                                    settings.normalisation, settings.max_iter,

@@ -23,8 +23,8 @@ predicts the pixels best, and a real feature lowers ``c`` by far more than ``ln 
 (hundreds to thousands on the bumps of the benchmark).
 
 The fall to each finer level is first predicted from the current Gauss-Newton system
-(``c_s' ~= c - b^T G_s' b``, exact for a linear problem); the coarsest level predicted to
-lower the criterion is iterated and its measured criterion decides.
+(``c_s' ~= c - b^T G_s' b``, exact for a linear problem); the level of lowest predicted
+criterion is iterated and its measured criterion decides.
 """
 from __future__ import annotations
 

@@ -22,13 +22,15 @@ def test_ladder_of_a_dyadic_mesh_is_the_paper_space_plus_nothing():
 
 
 def test_ladder_ends_on_the_spline_of_a_non_dyadic_mesh():
-    """24 x 16 elements on a one-element rectangle: dyadic levels 1, 2, 4, 8 spans, then the
-    spline of the 24 x 16 elements (26 x 18 dofs); every level nested in the next (Eq. 13:
-    the coarse operator is a refinement of the fine one, C_c = C_r C_f)."""
+    """24 x 16 elements on a one-element rectangle: from the spline of the elements down by
+    halving, 24 x 16, 12 x 8, 6 x 4, 3 x 2, 2 x 1 (u knots 0, 2/3, 1) spans and the nominal;
+    every level nested in the next (Eq. 13: the coarse operator is a refinement of the fine
+    one, C_c = C_r C_f)."""
     model = nominal_model(rectangle(60.0, 40.0), (24, 16), "Q9")
     space = ladder(model)
     dofs = [C.shape[0] for C in space.operators]
-    assert dofs == [26 * 18, 10 * 10, 6 * 6, 4 * 4, 3 * 3]
+    assert dofs == [26 * 18, 14 * 10, 8 * 6, 5 * 4, 4 * 3, 3 * 3]
+    assert np.allclose(space.patch(4).breaks[0], [0.0, 2.0 / 3.0, 1.0])
     for s in range(space.n_levels - 1):                  # C_{s+1} = C_r C_s (Eq. 28)
         Cr = space.refinement[s]
         assert abs(Cr @ space.operators[s] - space.operators[s + 1]).max() < 1e-12
