@@ -93,7 +93,8 @@ FAMILY_DEMO_SCALE = dict(FAMILY, length_mm=96.0, width_mm=80.0, centre_mm=(9.6, 
 
 def family_cameras(family: dict = FAMILY) -> tuple:
     """The family's exact stereo rig: the demo's cameras at ``pixel_mm`` per pixel."""
-    return demo_cameras(image_size=family["image_size"], stereo_angle_deg=family["stereo_angle_deg"],
+    return demo_cameras(image_size=family["image_size"],
+                        stereo_angle_deg=family["stereo_angle_deg"],
                         field_mm=family["image_size"][0] * family["pixel_mm"])
 
 
@@ -109,7 +110,8 @@ def family_specimen(divisor: int | None, speckle_mm: float, family: dict = FAMIL
                         seed=family["seed"])
     bump = dict(amplitude=family["amplitude_mm"], sigma=family_sigma(divisor, family),
                 centre=family["centre_mm"])
-    return Specimen(family["length_mm"], family["width_mm"], height=functools.partial(_bump, **bump),
+    return Specimen(family["length_mm"], family["width_mm"],
+                    height=functools.partial(_bump, **bump),
                     height_gradient=functools.partial(_bump_gradient, **bump),
                     speckle_mm=speckle_mm, seed=family["seed"])
 

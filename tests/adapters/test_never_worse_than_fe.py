@@ -31,16 +31,30 @@ Never worse than FE: holds on every case. Not worse than the best fixed Tikhonov
 holds on the twisted plate only (strict xfails below). On the flat plate and every bump the
 search climbs to the spline of the FE mesh (Mallows' Cp gains 20 to 600 kappa per added
 dof), the flat plate included, so it does not choose a finer level for the narrow bump
-than for the flat plate either: its noise model is scaled to the residual the FE mesh
-leaves, and on these renders the FE mesh fits image-model misfit that is not white noise.
-Flat plate: the cost at the truth exceeds the FE solution's by 8.8 kappa per FE dof (noise
-alone: about 1) while the FE nodes lie 10.9 um RMS off the truth; without noise, 27 kappa
-per dof (cost 3.38 at the truth, 2.19 at FE, 10.6 um off). Rendered with 6 x 6 rays per pixel
-instead of 3 x 3, that noise-free misfit halves (FE 5.4 um, fixed 2 levels 0.3 um): much of
-it is the renderer's pixel integration of a 4 px speckle, which the FE mesh follows.
+than for the flat plate either. The ladder of the 40 x 40 mesh also jumps from 8 x 8 knot
+spans (100 dofs) to the mesh's 40 x 40 (1764): 16 does not divide 40.
 
-Time: 167 s wall, 73 s CPU on 2 cores shared with a load average of about 9 (four renders of
-704 x 736 px and 25 measurements).
+Why the search climbs (benchmarks/bench_levels.py, column "misfit"): at the TRUE shape,
+one FE step would lower the cost by b^T H^-1 b = 5.6 to 9.1 kappa per FE dof on these
+renders, where images that differ from the truth by their noise only give 1 (the
+definition of kappa). The renders integrate each pixel by 3 x 3 point samples of a 4 px
+speckle (texels of 0.67 px); that leaves a systematic misfit, the FE mesh fits it (10.9 um
+off a flat plate; 10.6 um without noise) and Cp counts it as shape (the twisted plate's
+render, 500 x 333 px, has a misfit of 1.29: there the search stays on its start level). The
+same scenes rendered
+with 6 x 6 rays per pixel have a misfit of 1.25 to 1.4 on the flat plate and the 6 and 3 mm
+bumps: the search then stops at level 1 (100 dofs) on the flat plate (0.73 um; Tikhonov
+20 mm 0.33 um) and beats every Tikhonov length on the 6 and 3 mm bumps (2.10 um against
+2.32 and 3.94 um), but not on the 30 and 12 mm bumps (6.22 against 3.10, 3.13 against 2.31),
+whose misfit stays at 6.9 and 2.5 (not explained here; the broad bumps lift most of the plate
+off the plane where the two views' sub-pixel phases are symmetric, which suggests the
+interpolation bias of the image model).
+The independent rasteriser riley-raster shows the same: aliased at this scale with 4 x 4
+sub-pixels (misfit 7 to 10, same verdicts as here), near noise at the demo's scale (1.3 to
+1.5 on the flat plate and the narrow bumps).
+
+Time: 41 s wall, 68 s CPU on an idle 2-core machine (167 s wall under a load average of
+about 9): four renders of 704 x 736 px and 25 measurements.
 """
 from __future__ import annotations
 
