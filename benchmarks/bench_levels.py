@@ -48,6 +48,21 @@ run this script with that venv's python. With ``riley`` the script first checks 
 camera conversion: a flat plate rendered by riley with bilinear sampling and the core's
 sub-pixel grid must equal the core's render.
 
+Measured (2 cores shared with other work, load average 3 to 9; the full tables are printed
+by the commands below):
+
+- never worse than FE: auto <= FE on every shape, both renderers, both scales;
+- not worse than the best fixed Tikhonov length: only on the twisted plate (both renderers,
+  both scales) and, with riley at the demo's scale, on the 4 mm bump (1.98 against 2.18 um);
+- with the core's renders (3 x 3 rays per pixel) the search climbs to the FE mesh's spline
+  on every family shape, flat included (demo scale: 9.15 um on the flat plate, against
+  3.05 for Tikhonov 10 mm and 1.29 for 2 fixed levels; misfit 4.8 to 9.4); with riley at
+  the demo's scale (misfit 1.3 to 1.5 on the flat plate and the narrow bumps) it stops at
+  level 1 (100 dofs) on the flat plate and at the mesh's spline on the bumps;
+- the search's added time over 3 fixed levels: 0 to 12 % where it stays on its start
+  level (the twisted plate), 100 to 210 % where it climbs (the final measurement at the
+  2100-dof level, with its shape uncertainty, is most of it): above the 50 % target.
+
 Run: ``python benchmarks/bench_levels.py [--quick] [--renderer core|riley|both] [--repeat 3]
 [--shapes twisted flat 2 5 10 20] [--supersample 3] [--riley-subsample 4]``
 """
