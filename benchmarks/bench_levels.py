@@ -60,8 +60,9 @@ by the commands below):
   the demo's scale (misfit 1.3 to 1.5 on the flat plate and the narrow bumps) it stops at
   level 1 (100 dofs) on the flat plate and at the mesh's spline on the bumps;
 - the search's added time over 3 fixed levels: 0 to 12 % where it stays on its start
-  level (the twisted plate), 100 to 210 % where it climbs (the final measurement at the
-  2100-dof level, with its shape uncertainty, is most of it): above the 50 % target.
+  level (the twisted plate), 100 to 210 % (medians of 3 runs) where it climbs (the final
+  measurement at the 2100-dof level, with its shape uncertainty, is most of it): above the
+  50 % target.
 
 Run: ``python benchmarks/bench_levels.py [--quick] [--renderer core|riley|both] [--repeat 3]
 [--shapes twisted flat 2 5 10 20] [--supersample 3] [--riley-subsample 4]``
