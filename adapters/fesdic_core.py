@@ -26,7 +26,7 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline",
+__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
 
@@ -144,3 +144,14 @@ def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int =
     moved = patch.control_points + values.reshape(patch.control_points.shape[:2])[..., None] \
         * patch.control_normals().reshape(patch.control_points.shape)
     return dataclasses.replace(patch, control_points=moved), values
+
+
+def measured_spline_std(solver: GeometricRegularization, H, variance: float, level: int) -> np.ndarray:
+    """Standard deviation (mm) of the measured spline's control values (Eq. 21):
+    ``q_s = (C_s H C_s^T)^-1 C_s b`` has the covariance ``kappa (C_s H C_s^T)^-1`` under the
+    noise model ``Cov(b) = kappa H`` of the core (before the gauge's projection of the
+    rigid modes). One value per control point, as :func:`measured_spline`'s values."""
+    space = solver.space
+    H_s, _ = solver.project(H, np.zeros(space.n_fe), level)
+    variance_s = variance * np.diag(np.linalg.inv(H_s.toarray()))
+    return np.sqrt(np.clip(space.control_point_values(variance_s, level), 0.0, None))

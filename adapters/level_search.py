@@ -3,16 +3,20 @@
 1. The paper's coarse-to-fine run (section 3.3): image scale ``s`` on spline level
    ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
-2. At the finest image scale, the spline space is enriched one or more knot-insertion
-   levels at a time while Mallows' Cp falls (:mod:`georeg_plugin.selection`): the fall of
-   the gray-level cost to every finer level is predicted from the converged Gauss-Newton
-   system, the best predicted level is iterated from the current solution (the levels are
-   nested, Eq. 13: no restart from scratch), and its measured Cp decides.
+2. At the finest image scale, the spline space is enriched while the Bayesian information
+   criterion falls (:mod:`georeg_plugin.selection`): the fall of the gray-level cost to
+   every finer level is predicted from the converged Gauss-Newton system; the coarsest
+   level predicted to lower the criterion (the next one, or a finer one if only a finer
+   one holds a feature: the search looks ahead and does not stop on a level that adds too
+   little) is iterated from the current solution (the levels are nested, Eq. 13: no
+   restart from scratch), and its measured criterion decides.
 3. If a finer level was chosen, one more fixed point of calibration and shape at that level
    (the core's :func:`~fesdic_core.driver.measure`, with its verdict and uncertainty).
 
-The noise variance ``kappa`` of Cp is the core's noise model (:mod:`fesdic_core.uncertainty`):
-image noise through the image model, scaled to the residual the FE model leaves.
+The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.uncertainty`:
+image noise through the image model, scaled to the residual the FE model leaves), or the
+larger share per dof of the image model's misfit, measured on the dofs that the FE mesh
+adds beyond the finest spline level (:func:`effective_variance`).
 """
 from __future__ import annotations
 
@@ -22,15 +26,18 @@ import time
 from typing import Callable, Sequence
 
 import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
 
 from fesdic_core.driver import Measurement, MeasurementSettings, measure
 from fesdic_core.image import pyramid
 from fesdic_core.shape import shape_gauss_newton
+from fesdic_core.solvers import seen_dofs
 from fesdic_core.uncertainty import linearised_state
 from fesdic_core.mesh import node_normals
 from georeg_plugin.operators import MultilevelSpace, nested_space
 from georeg_plugin.refine import insert_knots, refine_uniform
-from georeg_plugin.selection import LevelTrial, mallows_cp, noise_gain, predicted_fit
+from georeg_plugin.selection import LevelTrial, information_criterion, noise_gain, predicted_fit
 from georeg_plugin.solver import GeometricRegularization
 
 from .fesdic_core import NominalModel
@@ -45,7 +52,7 @@ class LevelSearch:
     """What the level search did: one :class:`LevelTrial` per level looked at, in order.
 
     ``chosen``/``start``: level indices in the ladder (0 = the spline of the FE mesh);
-    ``n_levels``: levels in the ladder; ``variance``: the noise variance ``kappa`` of Cp;
+    ``n_levels``: levels in the ladder; ``variance``: the images' noise variance ``kappa``;
     ``time_s``: the time the search added to the fixed-level run.
     """
 
@@ -57,7 +64,9 @@ class LevelSearch:
     time_s: float
 
     def as_dict(self) -> dict:
-        return {"chosen_level": self.chosen, "start_level": self.start, "n_levels": self.n_levels,
+        chosen = [t.dofs for t in self.trials if t.chosen]
+        return {"chosen_level": self.chosen, "chosen_dofs": chosen[0] if chosen else None,
+                "start_level": self.start, "n_levels": self.n_levels,
                 "noise_variance": self.variance, "time_s": self.time_s,
                 "trials": [dataclasses.asdict(t) for t in self.trials]}
 
@@ -114,12 +123,35 @@ def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
 
 
 def _trial(level: int, space: MultilevelSpace, chi_square: float, reference: tuple, variance: float,
-           residual_percent: float, measured: bool) -> LevelTrial:
+           residual_percent: float, measured: bool, n_points: int) -> LevelTrial:
     dofs = space.operators[level].shape[0]
     return LevelTrial(level=level, dofs=dofs, chi_square=chi_square,
-                      cp=mallows_cp(chi_square, dofs, variance), residual_percent=residual_percent,
+                      criterion=information_criterion(chi_square, dofs, variance, n_points),
+                      residual_percent=residual_percent,
                       measured=measured, gain=noise_gain(*reference, chi_square, dofs, variance)
-                      if reference else float("nan"))
+                      if reference else float("nan"), variance=variance)
+
+
+def effective_variance(state, kappa: float, finest_step: np.ndarray | None, finest_dofs: int) -> float:
+    """The noise variance of the criterion: ``kappa`` of the images, or more if the data say so.
+
+    The image model's misfit (interpolation of the finest texture, a render's or a
+    sensor's pixel integration) is not white: it is correlated at the speckle scale and
+    acts on the shape like noise of larger variance, which finer levels fit as they fit
+    noise. Its share per dof is measured where no shape is expected, on the dofs that the
+    FE mesh adds beyond the finest spline level (elements of 16 px or more; like the
+    finest wavelet coefficients in wavelet shrinkage): ``(fall to FE - fall to the finest
+    spline) / (FE dofs - spline dofs)``, predicted from the current system.
+    """
+    seen = seen_dofs(state.H)
+    if finest_step is None or not seen.any():
+        return kappa
+    fall_fe = float(state.b[seen] @ spla.splu(sps.csc_matrix(state.H[seen][:, seen])).solve(state.b[seen]))
+    added = int(np.count_nonzero(seen)) - int(finest_dofs)
+    if added <= 0:
+        return kappa
+    misfit = (fall_fe - float(np.dot(state.b, finest_step))) / added
+    return max(kappa, misfit)
 
 
 def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence,
@@ -164,24 +196,34 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
 
     level, q, state = start, first.q, first.state
-    current = _trial(level, space, state.chi_square, (), kappa, state.residual.std_percent, True)
-    trials = [current]
-    iterations = 0
-    while level > 0:
-        reference = (current.chi_square, current.dofs)
-        predictions = []
-        for finer in range(level - 1, -1, -1):
-            step = GeometricRegularization(space, {finest: finer}).solve(state.H, state.b, q, finest)
-            chi = predicted_fit(state.chi_square, state.b, step)
-            predictions.append(_trial(finer, space, chi, reference, kappa,
-                                      residual_of(chi, state), False))
-        trials += predictions
-        best = min(predictions, key=lambda t: t.cp)
-        logger.info("level search: level %d (%d dofs) Cp %.6g; best predicted: level %d (%d dofs) "
-                    "Cp %.6g, gain %.3g kappa per dof", level, current.dofs, current.cp, best.level,
-                    best.dofs, best.cp, best.gain)
-        if best.cp >= current.cp:
+    trials, iterations, current = [], 0, None
+    while True:
+        # the fall of the cost to every finer level, predicted from the current system
+        steps = {finer: GeometricRegularization(space, {finest: finer}).solve(state.H, state.b, q,
+                                                                             finest)
+                 for finer in range(level - 1, -1, -1)}
+        variance = effective_variance(state, kappa, steps.get(0), space.operators[0].shape[0])
+        if current is None or current.variance != variance:
+            current = _trial(level, space, state.chi_square, (), variance,
+                             state.residual.std_percent, True, state.n_points)
+            trials.append(current)
+        if level == 0:
             break
+        reference = (current.chi_square, current.dofs)
+        predictions = [_trial(finer, space, chi, reference, variance, residual_of(chi, state), False,
+                              state.n_points)
+                       for finer, step in steps.items()
+                       for chi in [predicted_fit(state.chi_square, state.b, step)]]
+        trials += predictions
+        better = [t for t in predictions if t.criterion < current.criterion]  # coarse first
+        logger.info("level search: level %d (%d dofs) BIC %.6g; predicted gains per dof %s "
+                    "(threshold ln N = %.3g; noise variance %.3g = %.3g kappa)", level,
+                    current.dofs, current.criterion,
+                    ", ".join(f"level {t.level}: {t.gain:.3g}" for t in predictions),
+                    np.log(state.n_points), variance, variance / kappa)
+        if not better:
+            break
+        best = better[0]        # the coarsest level predicted better: one step at a time
         solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q, quad, imgs, cams, solver, finest,
                                    settings.normalisation, settings.max_iter,
@@ -189,12 +231,12 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         iterations += shape.iterations
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
                                        settings.normalisation)
-        measured = _trial(best.level, space, trial_state.chi_square, reference, kappa,
-                          trial_state.residual.std_percent, True)
+        measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
+                          trial_state.residual.std_percent, True, trial_state.n_points)
         trials.append(measured)
-        logger.info("level search: level %d measured: residual %.4f%%, Cp %.6g, gain %.3g", best.level,
-                    measured.residual_percent, measured.cp, measured.gain)
-        if measured.cp >= current.cp:
+        logger.info("level search: level %d measured: residual %.4f%%, BIC %.6g, gain %.3g",
+                    best.level, measured.residual_percent, measured.criterion, measured.gain)
+        if measured.criterion >= current.criterion:
             break
         level, q, state, current = best.level, shape.q, trial_state, measured
     solver = GeometricRegularization(space, {finest: level})
@@ -208,8 +250,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     else:
         final = dataclasses.replace(first, time_s=first.time_s + (time.perf_counter() - t0))
         solver = GeometricRegularization(space, schedule)
-    trials = [dataclasses.replace(t, chosen=t.measured and t.level == level
-                                  and t.chi_square == current.chi_square) for t in trials]
+    trials = [dataclasses.replace(t, chosen=t is current) for t in trials]
     search = LevelSearch(tuple(trials), level, start, n_levels, kappa,
                          final.time_s - first.time_s)
     logger.info("level search: chose level %d of %d (%d spline dofs; started on level %d), +%.2f s",

@@ -16,8 +16,9 @@ from the best integer shift of an integer search over -2..2 px; stopped when
 
 Image models (each optionally after a Gaussian prefilter ``sigma`` applied to BOTH images):
 
-- ``bspline3``: the core's cubic B-spline, ``Image.from_array(...).evaluate_with_gradient``
-  (2-D evaluation, exact spline gradient).
+- ``bspline3``: the core's cubic B-spline, ``Image.from_array(..., prefilter_px=0)
+  .evaluate_with_gradient`` (2-D evaluation, exact spline gradient); with a prefilter sigma
+  this is the core's image model ``Image.from_array(..., prefilter_px=sigma)``.
 - ``bspline5``: quintic B-spline, ``scipy.ndimage.spline_filter(order=5)`` then
   ``map_coordinates(order=5, prefilter=False)``; gradient by central finite differences of
   the spline with ``h = 1e-4`` px (error ~1e-9 gray level / px, far below any bias here).
@@ -123,7 +124,7 @@ Evaluator = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def _model_bspline3(img: np.ndarray, rows: np.ndarray, cols0: np.ndarray) -> Callable:
-    core = Image.from_array(img)
+    core = Image.from_array(img, prefilter_px=0.0)      # the bare spline: the prefilter is applied above
 
     def ev(u: float) -> tuple[np.ndarray, np.ndarray]:
         v, g = core.evaluate_with_gradient(np.column_stack([cols0 + u, rows]))

@@ -1,23 +1,45 @@
-"""Gray-level images ``f`` and ``g`` of Eq. 3: cubic B-spline interpolant, gradient, pyramids.
+"""Gray-level images ``f`` and ``g`` of Eq. 3: the image model (Gaussian prefilter + cubic
+B-spline interpolant), its gradient, pyramids.
 
 Pixel coordinates ``(x, y)`` = (column, row), pixel centres at integers, so the image
-covers ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``. The interpolant is the cubic B-spline
-``f(x, y) = sum_kl c_kl b3(y - k) b3(x - l)`` through the pixel values, with the
+covers ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``.
+
+The image model. The pixel values are first smoothed by a sampled Gaussian of standard
+deviation ``prefilter_px`` pixels (:func:`scipy.ndimage.gaussian_filter`, mode "mirror";
+0 = no prefilter), then interpolated by the cubic B-spline
+``f(x, y) = sum_kl c_kl b3(y - k) b3(x - l)`` through the smoothed values, with the
 coefficients ``c`` computed once by :func:`scipy.ndimage.spline_filter` (mode "mirror":
 the image is continued symmetrically about its first and last pixel centres, and so are
-the coefficients). The gradient is the exact derivative of that same spline; the value and
-the gradient are evaluated together by one 4x4 tensor-product sum over the coefficients
+the coefficients). The prefilter lowers the sub-pixel bias of the interpolant and the
+bias that the noise of the interpolated image adds (``benchmarks/bench_interpolation_bias.py``).
+End to end on stereo shapes (``benchmarks/bench_image_model.py``, README "Interpolation
+bias") it lowers the error where the sensor noise matters, but an image-space blur is a
+different blur on the specimen in the two views and it mixes the background into the
+texture along the specimen's edges: both grow with sigma. :data:`DEFAULT_PREFILTER_PX` is
+the sigma with the lowest total error there. Both images of a pair must use the same
+model (the residual compares them).
+
+``Image.values`` stay the RAW pixel values (the noise floor of :mod:`fesdic_core.noise`
+and the dynamic range are taken on them); only the interpolant (``coefficients``, what
+:meth:`Image.evaluate` and :meth:`Image.evaluate_with_gradient` return) is smoothed.
+:meth:`Image.with_values` builds an image of other raw values through the same model.
+
+The gradient is the exact derivative of the spline; the value and the gradient are
+evaluated together by one 4x4 tensor-product sum over the coefficients
 (``b3' (t) = b2(t + 1/2) - b2(t - 1/2)``), which :func:`map_coordinates` cannot do since it
 uses one spline order in both directions. That sum is the hot loop of every Gauss-Newton
 iteration: it runs in the compiled kernel ``fesdic_core._bspline`` (one pass per point, the
 points split over threads), or, if the package was installed without a C compiler, in the
 vectorised numpy twin :func:`_evaluate_numpy` (same arithmetic, about 10x slower).
 
-``dynamic_range`` is ``max - min`` of the pixel values (of the data, not of the bit depth):
-it is the scale of the gray-level residual reported in percent.
+``dynamic_range`` is ``max - min`` of the raw pixel values (of the data, not of the bit
+depth): it is the scale of the gray-level residual reported in percent.
 
-The multiscale images of Remark 3 are 2x2 block means (:meth:`Image.coarsen`); the matching
-camera is :meth:`fesdic_core.camera.Camera.scaled`.
+The multiscale images of Remark 3 (:meth:`Image.coarsen`) are 2x2 block means of the RAW
+values, modelled with the same ``prefilter_px`` in coarse pixels (a coarse image is the
+picture a camera of half the resolution would take, so it gets the same model; measured
+in README "Interpolation bias"); the matching camera is
+:meth:`fesdic_core.camera.Camera.scaled`.
 """
 from __future__ import annotations
 
@@ -38,10 +60,15 @@ except ImportError:                              # pragma: no cover - no C compi
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL"]
+__all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL", "DEFAULT_PREFILTER_PX",
+           "check_prefilter"]
 
 #: True when the fused C kernel is in use (else the numpy twin)
 COMPILED_KERNEL = _bspline is not None
+
+#: default standard deviation (px) of the Gaussian prefilter of the image model
+#: (measured choice: benchmarks/bench_image_model.py, README "Interpolation bias")
+DEFAULT_PREFILTER_PX = 0.5
 
 _BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
 
@@ -53,6 +80,28 @@ class ImageError(ValueError):
 _PAD = 2                          # coefficient padding: covers the 4x4 support of x in [0, n - 1]
 _BLOCK = 1 << 14                  # points per block of the numpy twin (bounds memory)
 _PARALLEL_BLOCK = 1 << 17         # points per block shared out over threads
+
+
+def check_prefilter(prefilter_px: float) -> float:
+    """``prefilter_px`` as a float; raises ValueError unless it is a finite number >= 0."""
+    try:
+        sigma = float(prefilter_px)
+    except (TypeError, ValueError):
+        raise ValueError(f"prefilter_px must be a number >= 0 (px), got {prefilter_px!r}") from None
+    if not (np.isfinite(sigma) and sigma >= 0.0):
+        raise ValueError(f"prefilter_px must be a finite number >= 0 (px), got {prefilter_px!r}")
+    return sigma
+
+
+def _noise_gain(prefilter_px: float) -> float:
+    """``sum w^2`` of the 1-D sampled Gaussian of :func:`scipy.ndimage.gaussian_filter` (1 for 0)."""
+    if prefilter_px <= 0:
+        return 1.0
+    radius = int(4.0 * prefilter_px + 0.5)                     # scipy's default truncate = 4
+    impulse = np.zeros(2 * radius + 1)
+    impulse[radius] = 1.0
+    weights = ndimage.gaussian_filter1d(impulse, prefilter_px, mode="constant")
+    return float(np.sum(weights ** 2))
 
 
 def _fold(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -85,20 +134,26 @@ def _xy(xy: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Image:
-    """A gray-level image and its cubic B-spline interpolant.
+    """A gray-level image and its image model (Gaussian prefilter + cubic B-spline).
+
+    Build it with :meth:`from_array` or :func:`read_image`; the constructor takes the
+    coefficients as given (``prefilter_px`` then only records how they were made).
 
     Attributes
     ----------
-    values : (h, w) float64 pixel values
-    coefficients : (h, w) cubic B-spline coefficients of ``values`` (mirror boundary)
+    values : (h, w) float64 RAW pixel values (not prefiltered)
+    coefficients : (h, w) cubic B-spline coefficients of the prefiltered values (mirror boundary)
     dynamic_range : ``max - min`` of ``values``
     source : file name or label, used in messages
+    prefilter_px : standard deviation (px) of the Gaussian applied to ``values`` before the
+        spline (0 = none)
     """
 
     values: np.ndarray
     coefficients: np.ndarray
     dynamic_range: float
     source: str = "array"
+    prefilter_px: float = 0.0
 
     def __post_init__(self) -> None:
         for field in ("values", "coefficients"):
@@ -113,31 +168,65 @@ class Image:
         if self.values.shape != self.coefficients.shape:
             raise ImageError(f"image {self.source!r}: coefficients shape {self.coefficients.shape} "
                              f"differs from values shape {self.values.shape}")
+        try:
+            object.__setattr__(self, "prefilter_px", check_prefilter(self.prefilter_px))
+        except ValueError as err:
+            raise ImageError(f"image {self.source!r}: {err}") from None
         object.__setattr__(self, "dynamic_range", float(self.dynamic_range))
         padded = np.pad(self.coefficients, _PAD, mode="reflect")   # numpy "reflect" = scipy "mirror"
         object.__setattr__(self, "_padded", np.ascontiguousarray(padded).ravel())
 
     @classmethod
-    def from_array(cls, a: np.ndarray, source: str = "array") -> "Image":
-        """Image of a 2-D array (h, w); raises :class:`ImageError` for NaN/inf or a wrong shape."""
+    def from_array(cls, a: np.ndarray, source: str = "array",
+                   prefilter_px: float = DEFAULT_PREFILTER_PX) -> "Image":
+        """Image of a 2-D array (h, w) of raw pixel values.
+
+        Parameters
+        ----------
+        a : (h, w) pixel values (copied)
+        source : file name or label, used in messages
+        prefilter_px : standard deviation (px) of the Gaussian prefilter of the model
+            (0 = the cubic B-spline through the raw values)
+
+        Raises
+        ------
+        ImageError
+            For NaN/inf values, a wrong shape, or a negative or non-finite ``prefilter_px``.
+        """
         values = np.array(a, dtype=np.float64)
         if values.ndim != 2 or min(values.shape) < 1:
             raise ImageError(f"image {source!r}: expected a non-empty 2-D array, got shape {values.shape}")
         bad = np.count_nonzero(~np.isfinite(values))
         if bad:
             raise ImageError(f"image {source!r}: {bad} non-finite (NaN/inf) pixel values")
-        coefficients = ndimage.spline_filter(values, order=3, output=np.float64, mode="mirror")
+        try:
+            sigma = check_prefilter(prefilter_px)
+        except ValueError as err:
+            raise ImageError(f"image {source!r}: {err}") from None
+        smoothed = ndimage.gaussian_filter(values, sigma, mode="mirror") if sigma > 0 else values
+        coefficients = ndimage.spline_filter(smoothed, order=3, output=np.float64, mode="mirror")
         values.flags.writeable = coefficients.flags.writeable = False   # owned here: no copy
-        return cls(values, coefficients, float(values.max() - values.min()), str(source))
+        return cls(values, coefficients, float(values.max() - values.min()), str(source), sigma)
+
+    @property
+    def noise_gain(self) -> float:
+        """Standard deviation of the model's (prefiltered) pixel values per unit of white noise
+        in the raw pixels: ``sum_n w_n^2`` for the 1-D weights ``w`` of the sampled Gaussian
+        (the 2-D kernel is their outer product); 1 without prefilter (0.64 at 0.5 px, 0.31
+        at 0.9 px). The noise floor of the residual (:mod:`fesdic_core.noise`) scales by it."""
+        return _noise_gain(self.prefilter_px)
 
     def with_values(self, values: np.ndarray) -> "Image":
-        """An image of new raw pixel values under the same image model and source (e.g.
-        the values plus simulated noise, :mod:`fesdic_core.uncertainty`)."""
-        return Image.from_array(values, self.source)
+        """A new image of the raw pixel ``values`` (h', w') through the SAME model and source.
+
+        E.g. to simulate noise through the image model: ``image.with_values(image.values + n)``.
+        """
+        return Image.from_array(values, self.source, prefilter_px=self.prefilter_px)
 
     def __repr__(self) -> str:
         h, w = self.values.shape
-        return f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g})"
+        return (f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g}, "
+                f"prefilter_px={self.prefilter_px:g})")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -145,7 +234,7 @@ class Image:
         return self.values.shape
 
     def evaluate(self, xy: np.ndarray) -> np.ndarray:
-        """Interpolated gray levels at ``xy`` (n, 2) = (x, y); returns (n,)."""
+        """Gray levels of the model (prefiltered, interpolated) at ``xy`` (n, 2) = (x, y); returns (n,)."""
         xy = _xy(xy)
         return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=3,
                                        mode="mirror", prefilter=False)
@@ -185,13 +274,14 @@ class Image:
                     & (xy[:, 1] >= lo) & (xy[:, 1] <= h - 0.5 - margin))
 
     def coarsen(self) -> "Image":
-        """2x2 block mean (an odd last row/column is dropped), the next scale of Remark 3."""
+        """The next scale of Remark 3: 2x2 block means of the RAW values (an odd last
+        row/column is dropped), with the same model (``prefilter_px`` in coarse pixels)."""
         h, w = self.values.shape
         if h < 2 or w < 2:
             raise ImageError(f"image {self.source!r}: {w}x{h} px is too small to coarsen")
         v = self.values[: h - h % 2, : w - w % 2]
         coarse = v.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
-        return Image.from_array(coarse, f"{self.source} /2")
+        return Image.from_array(coarse, f"{self.source} /2", prefilter_px=self.prefilter_px)
 
 
 def _evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
@@ -225,15 +315,18 @@ def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: n
             grad[block][~finite] = np.nan
 
 
-def read_image(path: str | os.PathLike) -> Image:
+def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_PX) -> Image:
     """Read an 8- or 16-bit (or float) TIFF/PNG as gray levels (colour is converted to gray).
+
+    ``prefilter_px``: the Gaussian prefilter of the image model (see :meth:`Image.from_array`).
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     ImageError
-        If OpenCV cannot decode it, or it holds NaN/inf values.
+        If OpenCV cannot decode it, or it holds NaN/inf values (or ``prefilter_px`` is
+        negative or not finite).
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -249,13 +342,13 @@ def read_image(path: str | os.PathLike) -> Image:
             a = a[:, :, :3] @ _BGR_TO_GRAY                        # OpenCV stores BGR(A)
         else:
             raise ImageError(f"image file {path!r}: unsupported {a.shape[2]} channels")
-    image = Image.from_array(a, source=path)
+    image = Image.from_array(a, source=path, prefilter_px=prefilter_px)
     logger.debug("read %s: %dx%d px, range %.6g", path, a.shape[1], a.shape[0], image.dynamic_range)
     return image
 
 
 def pyramid(image: Image, n_scales: int) -> list[Image]:
-    """Images of scales ``0 .. n_scales - 1`` (index = scale, 0 = finest), by 2x2 block means."""
+    """Images of scales ``0 .. n_scales - 1`` (index = scale, 0 = finest), by :meth:`Image.coarsen`."""
     if int(n_scales) != n_scales or n_scales < 1:
         raise ValueError(f"n_scales must be a positive integer, got {n_scales!r}")
     levels = [image]

@@ -13,13 +13,21 @@ over the pixels that the integration points fall on (the region of interest), no
 the background. On a noise-free rendered speckle it gives the texture's fine content,
 which is the part the interpolation cannot follow; with noise it adds in quadrature.
 
-A residual consistent with the images then has a standard deviation (in gray levels of
-image 0, as :attr:`GrayLevelResidual.std_percent`) of about
-``sqrt(sigma_0**2 + (s_0 / s_1)**2 sigma_1**2)`` where ``s_c`` is the contrast of image
-``c`` over the region (the residual compares normalised gray levels, Remark 2). Measured
-on renders with known truth (``benchmarks/bench_verdict.py``), the converged residual is
-0.43 times this figure without noise and 0.58 with 2 gray levels, and 13-17 times it for
-swapped images or a camera turned by 10 degrees: :data:`CONSISTENCY_FACTOR` lies between.
+The residual compares the images through their image model (:mod:`fesdic_core.image`):
+a Gaussian prefilter of the raw pixels, then the spline. The prefilter lowers the noise in
+the residual by the model's white-noise gain ``k_c`` (:attr:`Image.noise_gain`: the
+standard deviation of the prefiltered values per unit of white noise in the raw pixels,
+0.64 at 0.5 px), while sigma is estimated on the RAW values (Immerkaer's operator assumes
+white noise). A residual consistent with the images then has a standard deviation (in
+gray levels of image 0, as :attr:`GrayLevelResidual.std_percent`) of about
+``sqrt((k_0 sigma_0)**2 + (s_0 / s_1)**2 (k_1 sigma_1)**2)`` where ``s_c`` is the contrast
+of image ``c`` over the region (the residual compares normalised gray levels, Remark 2).
+Measured on renders with known truth (``benchmarks/bench_verdict.py``, the default model,
+prefilter 0.5 px), the converged residual is 0.48 times this figure without noise and 0.63
+with 2 gray levels, and 19-25 times it for swapped images or a camera turned by 10
+degrees (without prefilter: 0.43, 0.58 and 13-17): :data:`CONSISTENCY_FACTOR` lies between.
+The texture check (:meth:`NoiseFloor.texture_ratio`) keeps the raw sigma: it is about the
+image, not its model.
 """
 from __future__ import annotations
 
@@ -72,10 +80,11 @@ class NoiseFloor:
 
     Attributes
     ----------
-    sigma_gray : (2,) Immerkaer's sigma of each image over the region (gray levels)
+    sigma_gray : (2,) Immerkaer's sigma of each image's RAW values over the region (gray levels)
     contrast : (2,) standard deviation of each image's gray levels over the region
     percent : the residual's expected standard deviation, in percent of the dynamic range
-        of image 0 (the unit of ``std_percent``)
+        of image 0 (the unit of ``std_percent``), with each sigma times its image model's
+        white-noise gain
     """
 
     sigma_gray: tuple[float, float]
@@ -107,7 +116,8 @@ def residual_noise_floor(X: np.ndarray, mask: np.ndarray, images: Sequence, came
         else:
             contrast.append(float("nan"))
     ratio = contrast[0] / contrast[1] if contrast[1] > 0 else 1.0
-    gray = np.hypot(sigma[0], ratio * sigma[1])
+    gain = [float(getattr(image, "noise_gain", 1.0)) for image in images]
+    gray = np.hypot(gain[0] * sigma[0], ratio * gain[1] * sigma[1])
     dyn = float(images[0].dynamic_range)
     percent = 100.0 * gray / dyn if dyn > 0 else float("nan")
     return NoiseFloor(sigma_gray=(sigma[0], sigma[1]), contrast=(contrast[0], contrast[1]),

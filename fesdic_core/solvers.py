@@ -16,11 +16,10 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 logger = logging.getLogger(__name__)
 
-#: up to this many dofs a step covariance is computed densely (memory ~ 8 n^2 bytes)
-DENSE_LIMIT = 8000
 
 
 class SingularSystemError(RuntimeError):
@@ -108,36 +107,65 @@ class DirectSolver:
         return "DirectSolver()"
 
 
+def inverse_diagonal(H: sps.spmatrix) -> np.ndarray:
+    """``diag(H^-1)`` of a sparse symmetric positive definite matrix without forming ``H^-1``.
+
+    Reverse Cuthill-McKee ordering makes ``H`` banded (bandwidth ``w``: a few rows of nodes
+    of a structured FE mesh) and ``H = U^T U`` its banded Cholesky factor. With ``U`` cut
+    into blocks of ``w`` rows, ``U S = U^-T`` (``S = H^-1``) gives, from the last block
+    ``K`` back to the first (Takahashi's recurrence, K. Takahashi et al. 1973, by blocks):
+
+        S_IK = -U_II^-1 U_IK S_KK,     S_II = U_II^-1 (U_II^-T - U_IK S_IK^T),
+
+    for the block ``I`` and the next one ``K`` (``U`` has no entry beyond ``K`` in the rows
+    of ``I``): about ``5 n w^2`` flops in BLAS instead of the ``n^3 / 3`` of a dense inverse.
+    """
+    n = H.shape[0]
+    perm = reverse_cuthill_mckee(sps.csr_matrix(H), symmetric_mode=True)
+    A = sps.coo_matrix(sps.csr_matrix(H)[perm][:, perm])
+    w = max(1, int(np.max(np.abs(A.row - A.col))) if A.nnz else 1)
+    # SuperLU without pivoting on the banded SPD matrix: A = L U with U = D L^T, so the
+    # Cholesky factor is D^-1/2 U (sparse, within the band; LAPACK's banded potrf is slower)
+    lu = spla.splu(sps.csc_matrix(A), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                   options={"SymmetricMode": True})
+    if np.any(lu.perm_r != np.arange(n)) or np.any(lu.U.diagonal() <= 0.0):
+        raise SingularSystemError(f"H ({n} dofs) is not positive definite")
+    U = sps.csr_matrix(sps.diags(1.0 / np.sqrt(lu.U.diagonal())) @ lu.U)
+
+    def block(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:      # dense U[r0:r1, c0:c1]
+        return U[r0:r1, c0:c1].toarray()
+
+    diag = np.empty(n)
+    S_next = None
+    for start in range(((n - 1) // w) * w, -1, -w):                # blocks of w rows, last first
+        stop = min(n, start + w)
+        U_inv = sla.solve_triangular(block(start, stop, start, stop), np.eye(stop - start),
+                                     lower=False, check_finite=False)
+        if S_next is None:
+            S = U_inv @ U_inv.T
+        else:
+            U_ik = block(start, stop, stop, stop + len(S_next))
+            S_ik = -U_inv @ (U_ik @ S_next)
+            S = U_inv @ (U_inv.T - U_ik @ S_ik.T)
+        S_next = 0.5 * (S + S.T)
+        diag[start:stop] = np.diag(S)
+    out = np.empty(n)
+    out[perm] = diag
+    return out
+
+
 def inverse_covariance(H: sps.spmatrix) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
     """``diag(H^-1)`` and ``V -> H^-1 V``: the step covariance of the plain FE solve (in
     units of ``kappa``), over the dofs that see a point (others: NaN, their columns 0)."""
     n = H.shape[0]
     seen = seen_dofs(H)
     diag = np.full(n, np.nan)
-    if np.count_nonzero(seen) <= DENSE_LIMIT:
-        factor = sla.cho_factor(H[seen][:, seen].toarray(), lower=True, check_finite=False)
-        inverse = sla.cho_solve(factor, np.eye(np.count_nonzero(seen)), check_finite=False)
-        diag[seen] = np.diag(inverse)
+    H_seen = sps.csc_matrix(H[seen][:, seen])
+    diag[seen] = inverse_diagonal(H_seen)
+    lu = spla.splu(H_seen)
 
-        def apply(V: np.ndarray) -> np.ndarray:
-            out = np.zeros((n,) + V.shape[1:])
-            out[seen] = inverse @ V[seen]
-            return out
-        return diag, apply
-    lu = spla.splu(sps.csc_matrix(H[seen][:, seen]))
-    diag[seen] = _probed_diagonal(lu.solve, int(np.count_nonzero(seen)))
-
-    def apply_sparse(V: np.ndarray) -> np.ndarray:
+    def apply(V: np.ndarray) -> np.ndarray:
         out = np.zeros((n,) + V.shape[1:])
         out[seen] = lu.solve(np.asarray(V[seen], dtype=float))
         return out
-    return diag, apply_sparse
-
-
-def _probed_diagonal(solve: Callable[[np.ndarray], np.ndarray], n: int, probes: int = 128,
-                     seed: int = 0) -> np.ndarray:
-    """Diagonal of a symmetric operator by Rademacher probing (Bekas et al. 2007)."""
-    z = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n, probes))
-    return np.sum(z * solve(z), axis=1) / probes
-
-
+    return diag, apply

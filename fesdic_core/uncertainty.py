@@ -64,9 +64,9 @@ class NoiseModel:
 
     scale: int
     variance: float
-    variance_images: float
-    sigma_gray: tuple[float, float]
-    residual_ratio: float
+    variance_images: float = float("nan")
+    sigma_gray: tuple[float, float] = (float("nan"), float("nan"))
+    residual_ratio: float = float("nan")
     draws: int = 1
 
 

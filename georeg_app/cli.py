@@ -140,19 +140,6 @@ def _logging_to_stderr(quiet: bool, verbose: bool):
             logging.getLogger(name or None).setLevel(lvl)
 
 
-def measure_specs(config: Config) -> list:
-    """The method(s) of ``[method]``: one spec, or one per Tikhonov length."""
-    from .pipeline import MethodSpec
-    m = config.method
-    scales = m.scale_sequence
-    multi = " (multiscale)" if len(scales) > 1 else ""
-    if m.name == "tikhonov":
-        return [MethodSpec("tikhonov", float(length), scales, f"Tikhonov {length:g} mm")
-                for length in m.tikhonov_length_mm]
-    label = {"fe": "FE", "georeg": "georeg"}[m.name] + multi
-    return [MethodSpec(m.name, None, scales, label)]
-
-
 class MeasurementFailed(RuntimeError):
     """The run finished but its measurement(s) cannot be trusted (the message says why)."""
 
@@ -178,6 +165,7 @@ def _run(args: argparse.Namespace) -> Path:
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
     from .outputs import REPORT_FILE, summary_dict, write_all
+    from .methods import measure_specs
     from .pipeline import default_specs, demo_config, run_methods
 
     progress = progress_enabled(args.quiet)

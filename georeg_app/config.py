@@ -4,7 +4,7 @@ Relative paths are resolved against the folder of the configuration file. Unknow
 (at any level), wrong types, missing required keys and missing files are errors
 (:class:`ConfigError`) that name the file, the section and the key, e.g.::
 
-    ConfigError: config.toml: [method] levels: expected an integer, got "three"
+    ConfigError: config.toml: [method] levels: expected an integer or "auto", got "three"
     ConfigError: config.toml: [geometry] radius: unknown key (did you mean hole_radius_mm?)
 
 A complete example (every key; optional keys show their default in parentheses)::
@@ -36,13 +36,20 @@ A complete example (every key; optional keys show their default in parentheses):
 
     [method]                      # optional section
     name = "georeg"               # "fe" | "tikhonov" | "georeg"       (default "georeg")
-    levels = 3                    # spline levels of georeg            (default 3)
+    levels = "auto"               # georeg spline levels: "auto" (chosen from the data by an
+                                  # information criterion, README "Level choice") or an integer
+                                  # (the paper's fixed levels)          (default "auto")
+    start_levels = 3              # levels of the coarse-to-fine start of "auto" (default 3)
     scales = 3                    # image scales, coarse to fine       (default 3)
-    tikhonov_length_mm = [5.0, 10.0, 20.0]   # one number or a list    (default [5, 10, 20])
+    tikhonov_length_mm = [5.0, 10.0, 20.0, "auto"]   # numbers (mm) and/or "auto"
+                                  # (chosen from the data)   (default [5, 10, 20, "auto"])
     calibrate = true              # fixed point calibration <-> shape  (default true)
     keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
     max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
+    prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
+                                  # cubic B-spline, >= 0, 0 = none (default 0.5, the core's
+                                  # fesdic_core.image.DEFAULT_PREFILTER_PX)
 
     [output]                      # optional section
     dir = "georeg_out"            # output folder (default "georeg_out"; `--out` overrides)
@@ -59,6 +66,8 @@ from typing import Any
 
 import numpy as np
 
+from fesdic_core.image import DEFAULT_PREFILTER_PX
+
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
                           existing_file, integer, load_toml, number, numbers, resolve_path,
                           show, string, vector)
@@ -66,9 +75,24 @@ from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, 
 logger = logging.getLogger(__name__)
 
 METHOD_NAMES = ("fe", "tikhonov", "georeg")
+#: the value of ``levels`` and of a Tikhonov length chosen from the data
+AUTO = "auto"
+
+
+def integer_or_auto(value: Any) -> int | str:
+    """An integer (not a boolean) or the string "auto"."""
+    return value if value == AUTO else integer(value)
+
+
+def lengths_or_auto(value: Any) -> tuple:
+    """One length (mm) or "auto", or a non-empty list of them."""
+    values = value if isinstance(value, list) else [value]
+    if not values:
+        raise ValueError
+    return tuple(v if v == AUTO else number(v) for v in values)
 GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh")
 NORMALISATIONS = ("element", "global", "none")
-DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0)
+DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0, "auto")
 DEFAULT_OUTPUT_DIR = "georeg_out"
 
 
@@ -123,13 +147,20 @@ class GeometryConfig:
 @dataclass(frozen=True)
 class MethodConfig:
     name: str = "georeg"
-    levels: int = 3
+    levels: int | str = "auto"
+    start_levels: int = 3
     scales: int = 3
-    tikhonov_length_mm: tuple[float, ...] = DEFAULT_TIKHONOV_LENGTHS_MM
+    tikhonov_length_mm: tuple[float | str, ...] = DEFAULT_TIKHONOV_LENGTHS_MM
     calibrate: bool = True
     keep_stereo: bool = True
     normalisation: str = "element"
     max_fixed_point: int = 10
+    prefilter_px: float = DEFAULT_PREFILTER_PX
+
+    @property
+    def fixed_levels(self) -> int:
+        """The levels of the coarse-to-fine run: ``levels``, or ``start_levels`` if "auto"."""
+        return self.start_levels if self.levels == AUTO else int(self.levels)
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:
@@ -239,23 +270,28 @@ def _method(data: Any, source: Path) -> MethodConfig:
     d = MethodConfig()
     m = MethodConfig(
         name=t.take("name", string, "a string", default=d.name),
-        levels=t.take("levels", integer, "an integer", default=d.levels),
+        levels=t.take("levels", integer_or_auto, 'an integer or "auto"', default=d.levels),
+        start_levels=t.take("start_levels", integer, "an integer", default=d.start_levels),
         scales=t.take("scales", integer, "an integer", default=d.scales),
-        tikhonov_length_mm=t.take("tikhonov_length_mm", numbers, "a number or a list of numbers (mm)",
+        tikhonov_length_mm=t.take("tikhonov_length_mm", lengths_or_auto,
+                                  'a number, "auto" or a list of them (mm)',
                                   default=d.tikhonov_length_mm),
         calibrate=t.take("calibrate", boolean, "true or false", default=d.calibrate),
         keep_stereo=t.take("keep_stereo", boolean, "true or false", default=d.keep_stereo),
         normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
-        max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point))
+        max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point),
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px))
     t.finish()
     check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
-    check(t, "levels", m.levels, m.levels >= 1, ">= 1")
+    check(t, "levels", m.levels, m.levels == AUTO or m.levels >= 1, '>= 1 or "auto"')
+    check(t, "start_levels", m.start_levels, m.start_levels >= 1, ">= 1")
     check(t, "scales", m.scales, m.scales >= 1, ">= 1")
     check(t, "tikhonov_length_mm", list(m.tikhonov_length_mm),
-           all(v > 0 for v in m.tikhonov_length_mm), "> 0")
+           all(v == AUTO or v > 0 for v in m.tikhonov_length_mm), '> 0 or "auto"')
     check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
+    check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     return m
 
 

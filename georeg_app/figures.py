@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 
 from .maps import (FAILED_GREY, bfp_frame, cmap_colours, error_maps,  # noqa: F401 (re-exported)
-                   nice_scale_factor, png, residual_maps, shape_maps)
+                   nice_scale_factor, png, residual_maps, shape_maps, uncertainty_maps)
 from .run_view import best_method, georeg_pair, is_failed, rms_error_um, succeeded
 
 logger = logging.getLogger(__name__)
@@ -172,7 +172,7 @@ def make_figures(run) -> dict[str, bytes]:
     candidates = {"shape_maps": shape_maps, "residual_maps": residual_maps,
                   "error_maps": error_maps, "convergence": convergence,
                   "multiscale_vs_monoscale": multiscale_vs_monoscale,
-                  "shape_errors": shape_errors}
+                  "shape_errors": shape_errors, "uncertainty_maps": uncertainty_maps}
     figures = {}
     for name, draw in candidates.items():
         data = draw(run)

@@ -181,13 +181,41 @@ def _number(value) -> float | None:
     return None if value is None or not np.isfinite(value) else float(value)
 
 
+def _stat(values, how) -> float | None:
+    if values is None:
+        return None
+    values = np.asarray(values, float)
+    values = values[np.isfinite(values)]
+    return float(how(values)) if values.size else None
+
+
+def _uncertainty_entry(m) -> dict:
+    """The shape's standard deviation and bias indicator in summary.json (mm)."""
+    std, bias = getattr(m, "shape_std_mm", None), getattr(m, "shape_bias_mm", None)
+    noise = getattr(m, "noise", None)
+    return {"shape_std_median_mm": _stat(std, np.median), "shape_std_max_mm": _stat(std, np.max),
+            "shape_bias_median_mm": _stat(bias, np.median), "shape_bias_max_mm": _stat(bias, np.max),
+            "noise_variance": None if noise is None else _number(noise.variance)}
+
+
+def _levels_chosen(result) -> dict | None:
+    """georeg's level: the search's record (automatic levels) or the fixed level used."""
+    search = getattr(result, "level_search", None)
+    if search is not None:
+        return search.as_dict()
+    levels = getattr(result.spec, "levels", None)
+    return None if levels is None else {"fixed_levels": int(levels), "chosen_level": 0}
+
+
 def summary_dict(run) -> dict:
     """The ``summary.json`` document (issue 4; extend, do not change).
 
     ``{"truth_available": bool, "failed_methods": [label], "methods": [{"name", "param",
     "shape_rms_error_mm", "distance_to_bfp_rms_mm", "residual_percent", "iterations",
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
-    "noise_percent", "residual_to_noise", "scale_reports"}]}``. ``status`` is "ok" or
+    "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
+    "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
+    "levels_chosen", "regularization"}]}``. ``status`` is "ok" or
     "failed" (``failure`` says why); a method that failed without any state has null
     measurement fields and no mesh file.
     """
@@ -196,7 +224,8 @@ def summary_dict(run) -> dict:
         m, spec = result.measurement, result.spec
         entry = {
             "name": str(spec.name),
-            "param": None if spec.param is None else float(spec.param),
+            "param": None if spec.param is None else (spec.param if isinstance(spec.param, str)
+                                                      else float(spec.param)),
             "label": str(spec.label),
             "scales": [int(s) for s in spec.scales],
             "status": str(getattr(result, "status", "ok")),
@@ -205,6 +234,10 @@ def summary_dict(run) -> dict:
             "distance_to_bfp_rms_mm": None, "residual_percent": None, "noise_percent": None,
             "residual_to_noise": None, "iterations": None, "time_s": None, "mesh_file": None,
             "converged": False, "scale_reports": [],
+            "shape_std_median_mm": None, "shape_std_max_mm": None,
+            "shape_bias_median_mm": None, "shape_bias_max_mm": None, "noise_variance": None,
+            "levels_chosen": _levels_chosen(result),
+            "regularization": getattr(result, "regularization", None),
         }
         if m is not None:
             noise = getattr(m, "noise_percent", float("nan"))
@@ -223,6 +256,7 @@ def summary_dict(run) -> dict:
                                    "shape_converged": r.shape_converged,
                                    "fixed_point_converged": r.fixed_point_converged}
                                   for r in getattr(m, "scales", ())],
+                **_uncertainty_entry(m),
             })
         methods.append(entry)
     failed = [e["label"] for e in methods if e["status"] != "ok"]
@@ -232,7 +266,9 @@ def summary_dict(run) -> dict:
 
 def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
-    ``shape_correction_mm`` (q, along the nominal normals) and ``distance_to_bfp_mm``."""
+    ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
+    known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
+    ``shape_bias_mm`` (the bias indicator)."""
     from fesdic_core.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
@@ -241,6 +277,9 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     errors = getattr(result, "shape_error_mm", None)
     if errors is not None:
         point_data["shape_error_mm"] = np.asarray(errors, float)
+    for name in ("shape_std_mm", "shape_bias_mm"):
+        if getattr(m, name, None) is not None:
+            point_data[name] = np.asarray(getattr(m, name), float)
     write_mesh(path, mesh, point_data=point_data)
     return Path(path)
 
@@ -280,7 +319,10 @@ def write_spline_outputs(json_path: str | os.PathLike, iges_path: str | os.PathL
         logger.warning("%s: %d control values for %d control points; not written",
                        result.spec.label, np.size(values), n_ctrl)
         values = None
-    write_spline_json(json_path, patch, scalar_field=values)
+    std = getattr(result, "spline_std", None)
+    if values is None or std is None or np.size(std) != n_ctrl:
+        std = None
+    write_spline_json(json_path, patch, scalar_field=values, scalar_field_std=std)
     write_iges(iges_path, patch)
 
 

@@ -23,7 +23,9 @@ from typing import Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from adapters.fesdic_core import NominalModel, georeg_solver, measured_spline, nominal_model
+from adapters.fesdic_core import (NominalModel, georeg_solver, measured_spline, measured_spline_std,
+                                  nominal_model)
+from adapters.level_search import LevelSearch, measure_auto_levels
 from fesdic_core.accuracy import shape_error_to_surface
 from fesdic_core.driver import (Measurement, MeasurementInputError, MeasurementSettings,
                                 check_scales, measure)
@@ -40,8 +42,9 @@ from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements
 
 from . import installed_version
-from .config import (CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
+from .config import (AUTO, CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
                      OutputConfig)
+from .methods import MethodSpec, default_specs  # noqa: F401 (the pipeline's contract)
 
 logger = logging.getLogger(__name__)
 
@@ -51,22 +54,14 @@ DEMO = dict(length_mm=180.0, width_mm=50.0, view_mm=100.0, hole_radius_mm=14.0,
             field_mm=112.0, stereo_angle_deg=25.0, pose_error_deg=0.5, pose_error_mm=0.5)
 
 
-@dataclasses.dataclass(frozen=True)
-class MethodSpec:
-    """One method of a comparison."""
-
-    name: str                 # "fe" | "tikhonov" | "georeg"
-    param: float | None       # Tikhonov length (mm) for "tikhonov", else None
-    scales: tuple[int, ...]   # image scales, coarse to fine
-    label: str
-
-
 @dataclasses.dataclass(frozen=True, eq=False)
 class MethodResult:
     """One method's outcome. ``status`` is "ok" or "failed"; a failed method says why in
     ``failure`` and carries its (untrusted) measurement, or None if it gave no state at all.
     ``shape_error_mm``: per-node distance to the true surface after the best rigid
-    alignment (None without a truth)."""
+    alignment (None without a truth). ``level_search``: the record of georeg's automatic
+    level choice; ``spline_std``: the standard deviation of the measured spline's control
+    values (mm); ``regularization``: what the method chose (Tikhonov lengths per scale)."""
 
     spec: MethodSpec
     measurement: Measurement | None
@@ -78,6 +73,9 @@ class MethodResult:
     status: str = "ok"
     failure: str | None = None
     shape_error_mm: np.ndarray | None = None
+    level_search: LevelSearch | None = None
+    spline_std: np.ndarray | None = None
+    regularization: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -175,25 +173,13 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
 
 
 # ----------------------------------------------------------------------------- methods
-def default_specs(config: Config) -> list[MethodSpec]:
-    """All methods on the same data: FE, Tikhonov x lengths, georeg multi- and monoscale."""
-    scales = config.method.scale_sequence
-    specs = [MethodSpec("fe", None, scales, "FE (multiscale)")]
-    specs += [MethodSpec("tikhonov", float(length), scales, f"Tikhonov {length:g} mm")
-              for length in config.method.tikhonov_length_mm]
-    specs.append(MethodSpec("georeg", None, scales, "georeg (multiscale)"))
-    if len(scales) > 1:
-        specs.append(MethodSpec("georeg", None, (0,), "georeg (monoscale)"))
-    return specs
-
-
-def _solver(spec: MethodSpec, model: NominalModel, levels: int):
+def _solver(spec: MethodSpec, model: NominalModel):
     if spec.name == "fe":
         return None
     if spec.name == "tikhonov":
         return TikhonovSolver(model.mesh, spec.param)
     if spec.name == "georeg":
-        return georeg_solver(model, levels)
+        return georeg_solver(model, int(spec.levels))
     raise ValueError(f"unknown method {spec.name!r}")
 
 
@@ -222,7 +208,7 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
         raise ValueError(f"[method] scales = {config.method.scales}: {err}") from None
     if config.geometry.kind == "mesh":
         return
-    levels = config.method.levels
+    levels = config.method.fixed_levels
     coarse = int(np.prod(coarse_patch(config.geometry).n_elements))
     asked = config.geometry.elements
     if asked is not None and coarse * 4 ** (levels - 1) > 2 * asked:
@@ -284,9 +270,14 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
                                    keep_stereo=method.keep_stereo,
                                    normalisation=method.normalisation,
                                    max_fixed_point=method.max_fixed_point)
+    search = None
     try:
-        solver = _solver(spec, model, method.levels)
-        m = measure(model.mesh, images, cameras, solver, settings, progress=progress)
+        if spec.name == "georeg" and spec.levels == AUTO:
+            m, solver, search = measure_auto_levels(model, images, cameras, settings,
+                                                    method.start_levels, progress=progress)
+        else:
+            solver = _solver(spec, model)
+            m = measure(model.mesh, images, cameras, solver, settings, progress=progress)
     except (MeasurementInputError, MeshError):
         raise                                  # the inputs are wrong for every method
     except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
@@ -298,14 +289,20 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
     if truth is not None:
         errors = shape_error_to_surface(m.nodes, truth.specimen)
         rms = float(np.sqrt(np.mean(errors ** 2)))
-    spline = values = None
+    spline = values = spline_std = None
     if spec.name == "georeg" and m.ok:
-        spline, values = measured_spline(solver, m.q, 0)
+        level = solver.level(spec.scales[-1])
+        spline, values = measured_spline(solver, m.q, level)
+        if m.state is not None and m.noise is not None:
+            spline_std = measured_spline_std(solver, m.state.H, m.noise.variance, level)
+    chosen = getattr(solver, "chosen_lengths_mm", None)
     return MethodResult(spec=spec, measurement=m, mesh=model.mesh,
                         distance_to_bfp_mm=best_fit_plane_distance(m.nodes),
                         shape_rms_error_mm=rms, spline=spline, spline_values=values,
                         status="ok" if m.ok else "failed", failure=m.failure,
-                        shape_error_mm=errors)
+                        shape_error_mm=errors, level_search=search, spline_std=spline_std,
+                        regularization={"tikhonov_length_mm": {int(k): float(v) for k, v in
+                                                               chosen.items()}} if chosen else None)
 
 
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
@@ -326,12 +323,13 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     """
     started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     if images is None:
-        images = (read_image(config.images.cam0), read_image(config.images.cam1))
+        images = tuple(read_image(path, prefilter_px=config.method.prefilter_px)
+                       for path in (config.images.cam0, config.images.cam1))
     check_sizes(config, images)
     cameras = load_cameras(config.cameras, images)
     method = config.method
-    model = build_model(config.geometry, method.levels)
-    check_levels(model, method.levels, config.geometry)
+    model = build_model(config.geometry, method.fixed_levels)
+    check_levels(model, method.fixed_levels, config.geometry)
     logger.info("nominal model: %s, %d Q9 nodes, %d elements", config.geometry.kind,
                 model.mesh.n_nodes, model.mesh.n_elements)
     results = []

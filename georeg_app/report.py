@@ -27,7 +27,7 @@ import numpy as np
 
 from .figures import FE_ERROR_RATIO
 from .provenance import header_html
-from .run_view import best_method, failure, georeg_pair, is_failed, rms_error_um
+from .run_view import best_method, failure, georeg_main, georeg_pair, is_failed, rms_error_um
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +46,10 @@ FIGURE_CAPTIONS = {
     "multiscale_vs_monoscale": "Geometric regularization: multiscale against monoscale (Fig. 11).",
     "shape_errors": "RMS shape error against the truth (µm, when known) and RMS distance to the "
                     "best-fit plane (mm) per method.",
+    "uncertainty_maps": "Shape uncertainty per method: the standard deviation from the image "
+                        "noise and the bias indicator (the move of one notch less "
+                        "regularization; the std alone understates the error where the "
+                        "regularization misses part of the shape).",
 }
 
 #: the reports' style sheet (also used by the examples' reports)
@@ -91,7 +95,7 @@ def shape_claim(run) -> Claim:
             f"the unregularized FE run's")
     if not run.truth_available:
         return Claim(name, None, "no truth available (only the demo knows the true shape)")
-    multi, _ = georeg_pair(run)
+    multi = georeg_main(run)
     fe = [r for r in run.results if r.spec.name == "fe"]
     tik = [r for r in run.results if r.spec.name == "tikhonov"]
     if multi is None or not fe or not tik:
@@ -168,6 +172,51 @@ def _rms(values) -> float | None:
     return None if values is None else float(np.sqrt(np.mean(np.square(values))))
 
 
+def _median_max_um(values) -> str:
+    if values is None:
+        return "n/a"
+    values = 1e3 * np.asarray(values, float)
+    return f"{_f(float(np.nanmedian(values)), 3)} / {_f(float(np.nanmax(values)), 3)}"
+
+
+def _chosen(result) -> str:
+    """What a method chose from the data: georeg's level, Tikhonov's lengths per scale."""
+    search = getattr(result, "level_search", None)
+    if search is not None:
+        dofs = [t.dofs for t in search.trials if t.chosen]
+        return (f"level {search.chosen} of {search.n_levels}"
+                + (f" ({dofs[0]} dofs)" if dofs else ""))
+    chosen = (getattr(result, "regularization", None) or {}).get("tikhonov_length_mm")
+    if chosen:
+        return ", ".join(f"scale {k}: {v:.3g} mm" for k, v in sorted(chosen.items()))
+    return ""
+
+
+def level_search_html(run) -> str:
+    """Per georeg method with automatic levels: the levels looked at, their dofs, residual,
+    information criterion (BIC) and the statistic (gain per added dof in units of the noise
+    variance)."""
+    parts = []
+    for r in run.results:
+        search = getattr(r, "level_search", None)
+        if search is None or not search.trials:
+            continue
+        rows = "".join(
+            f"<tr><td>{t.level}</td><td>{t.dofs}</td><td>{'measured' if t.measured else 'predicted'}"
+            f"</td><td>{_f(t.residual_percent)}</td><td>{_f(t.criterion, 7)}</td><td>{_f(t.gain, 3)}</td>"
+            f"<td>{'chosen' if t.chosen else ''}</td></tr>" for t in search.trials)
+        parts.append(
+            f"<h3>{html.escape(r.spec.label)}: level search</h3><p>Levels of the ladder "
+            f"{search.n_levels} (0 = the spline of the FE mesh), start {search.start}, chosen "
+            f"{search.chosen}; noise variance kappa {_f(search.variance)}; added time "
+            f"{_f(search.time_s, 3)} s. A finer level is taken when it lowers the Bayesian "
+            "information criterion, i.e. when its fall of the cost per added dof exceeds ln N "
+            "times the noise variance (N integration points; noise alone gives about 1).</p>"
+            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>BIC</th>"
+            f"<th>gain per dof (kappa)</th><th></th></tr>{rows}</table>")
+    return "".join(parts)
+
+
 def methods_table_html(run) -> str:
     """HTML table of the methods: status (failed: reason), RMS error vs truth (um), RMS
     distance to BFP (mm), residual and noise floor (%; the column only when the run gives
@@ -177,19 +226,25 @@ def methods_table_html(run) -> str:
     head = ("<tr><th>method</th><th>name</th><th>param</th><th>status</th>"
             "<th>RMS shape error vs truth (µm)</th><th>RMS distance to BFP (mm)</th>"
             "<th>residual (% dyn.)</th>" + ("<th>noise floor (% dyn.)</th>" if noise else "")
-            + "<th>iterations</th><th>time (s)</th><th>converged</th></tr>")
+            + "<th>iterations</th><th>time (s)</th><th>converged</th>"
+            "<th>shape std median / max (µm)</th><th>bias indicator median / max (µm)</th>"
+            "<th>chosen</th></tr>")
     best, _ = best_method(run)
     rows = []
     for r in run.results:
         m = r.measurement
         status = f"failed: {failure(r)}" if is_failed(r) else ("best" if r is best else "ok")
-        cells = [r.spec.label, r.spec.name, "" if r.spec.param is None else f"{r.spec.param:g}",
+        param = r.spec.param
+        cells = [r.spec.label, r.spec.name, "" if param is None else
+                 (param if isinstance(param, str) else f"{param:g}"),
                  status, _f(rms_error_um(r)), _f(_rms(r.distance_to_bfp_mm))]
         if m is None:
-            cells += ["n/a"] * (5 if noise else 4)
+            cells += ["n/a"] * (8 if noise else 7)
         else:
             cells += [_f(m.residual_percent), *([_f(getattr(m, "noise_percent", None))] * noise),
-                      str(int(m.iterations)), _f(m.time_s, 3), "yes" if m.converged else "no"]
+                      str(int(m.iterations)), _f(m.time_s, 3), "yes" if m.converged else "no",
+                      _median_max_um(getattr(m, "shape_std_mm", None)),
+                      _median_max_um(getattr(m, "shape_bias_mm", None)), _chosen(r)]
         css = "failed" if is_failed(r) else ("best" if r is best else "")
         tds = "".join(f'<td class="status">{html.escape(c)}</td>' if k == 3 else
                       f"<td>{html.escape(c)}</td>" for k, c in enumerate(cells))
@@ -229,7 +284,7 @@ def report_html(run, figures: dict[str, bytes]) -> str:
     _, why_best = best_method(run)
     body = ["<h1>georeg: FE stereo-DIC shape measurement</h1>", _summary_line(run),
             header_html(run), "<h2>Methods</h2>", methods_table_html(run),
-            f'<p class="best-method">{html.escape(why_best)}</p>']
+            f'<p class="best-method">{html.escape(why_best)}</p>', level_search_html(run)]
     if claims:
         body += ['<h2 id="claims">Claims of the paper checked on this run</h2>', _claims_html(claims)]
     body += ["<h2>Figures</h2>", *(_figure_html(n, png) for n, png in figures.items())]

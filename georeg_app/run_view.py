@@ -108,8 +108,16 @@ def best_method(run) -> tuple[object | None, str]:
 
 
 def georeg_pair(run) -> tuple[object | None, object | None]:
-    """(multiscale, monoscale) georeg results of ``run`` (None when absent)."""
+    """(multiscale, monoscale) georeg results of ``run`` with the same fixed levels (None when
+    absent): the pair of the multiscale claim."""
     georeg = [r for r in run.results if r.spec.name == "georeg"]
-    mono = [r for r in georeg if "monoscale" in r.spec.label.lower()]
-    multi = [r for r in georeg if "monoscale" not in r.spec.label.lower()]
+    mono = [r for r in georeg if len(r.spec.scales) == 1]
+    multi = [r for r in georeg if len(r.spec.scales) > 1
+             and (not mono or getattr(r.spec, "levels", None) == getattr(mono[0].spec, "levels", None))]
     return (multi[0] if multi else None), (mono[0] if mono else None)
+
+
+def georeg_main(run) -> object | None:
+    """The run's first georeg result (the automatic levels when the run has them)."""
+    georeg = [r for r in run.results if r.spec.name == "georeg"]
+    return georeg[0] if georeg else None

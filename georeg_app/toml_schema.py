@@ -5,7 +5,7 @@ takes every key with a converter (``integer``, ``number``, ``vector(3)``, ...) a
 :meth:`Table.finish`, which turns any key left over into an "unknown key" error. Every
 error is a :class:`ConfigError` on one line that names the file, the table and the key::
 
-    config.toml: [method] levels: expected an integer, got "three"
+    config.toml: [method] levels: expected an integer or "auto", got "three"
     config.toml: [geometry] radius: unknown key (did you mean hole_radius_mm?)
 
 A converter takes the TOML value and returns the Python value, or raises ``TypeError`` or

@@ -76,7 +76,8 @@ def _weights_or_none(patch: SplinePatch) -> np.ndarray | None:
 
 # --------------------------------------------------------------------------- JSON
 def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
-                      scalar_field: np.ndarray | None = None) -> None:
+                      scalar_field: np.ndarray | None = None,
+                      scalar_field_std: np.ndarray | None = None) -> None:
     """Write a patch (and optionally one value per control point) as JSON, atomically.
 
     Parameters
@@ -84,6 +85,7 @@ def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
     path : output file.
     patch : SplinePatch with control points (nu, nv, 3) in mm.
     scalar_field : (nu, nv) or (nu * nv,), optional, e.g. the measured control values q_s.
+    scalar_field_std : same shape, optional: the standard deviation of ``scalar_field``.
     """
     cp = np.asarray(patch.control_points, dtype=float)
     nu, nv = cp.shape[:2]
@@ -99,6 +101,12 @@ def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
             raise ValueError(f"scalar_field has {f.size} values, the patch has "
                              f"{nu} x {nv} control points")
         doc["scalar_field"] = f.reshape(nu, nv).tolist()
+    if scalar_field_std is not None:
+        f = np.asarray(scalar_field_std, dtype=float)
+        if f.size != nu * nv:
+            raise ValueError(f"scalar_field_std has {f.size} values, the patch has "
+                             f"{nu} x {nv} control points")
+        doc["scalar_field_std"] = f.reshape(nu, nv).tolist()
     _atomic_write_text(pathlib.Path(path), json.dumps(doc, indent=1) + "\n")
     logger.info("wrote spline %s (%d x %d control points)", path, nu, nv)
 

@@ -12,7 +12,7 @@ import pytest
 from scenes import BUMP
 from fesdic_core.driver import MeasurementSettings, measure
 from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.tikhonov import TikhonovSolver
+from fesdic_core.tikhonov import TikhonovSolver, tikhonov_weight
 from shape_truth import bounded_shape_error, rms
 
 
@@ -69,3 +69,64 @@ def test_tikhonov_longer_than_the_feature_flattens_it(bump_scene, measured, mesh
     assert _peak(bump_scene, long, mesh) < 0.5 * _peak(bump_scene, short, mesh)
     # a bias, not noise: the long length fits the images worse (its residual is higher)
     assert long.residual_percent > short.residual_percent
+
+
+class _NoiseModel:
+    """Duck-typed noise model (the solver reads ``variance`` only)."""
+
+    def __init__(self, scale, variance):
+        self.scale, self.variance = scale, variance
+
+
+def _kappa(m):
+    """``kappa`` with ``Cov(b) ~= kappa H`` from a converged residual: with independent point
+    residuals of variance sigma^2, ``Cov(b) = sigma^2 sum w^2 phi phi^T``, so for (nearly)
+    uniform weights ``kappa = sum w^2 r^2 / sum w``."""
+    r, w = m.residual.r[m.residual.mask], m.quadrature.weight_mm2[m.residual.mask]
+    return float(np.sum(w * w * r * r) / np.sum(w))
+
+
+def test_automatic_length_on_images_is_as_good_as_the_best_fixed_one(bump_scene, measured, mesh):
+    """length_mm="auto" with the noise of the FE fit's residual: the Cp choice measures the
+    bump as well as the better fixed length (5 mm, error within 1.3 x) and better than FE and
+    the 30 mm length. Measured: it chooses 5 mm (the grid's shortest, 2 elements), 4.5 um."""
+    solver = TikhonovSolver(mesh, "auto")
+    solver.start_scale(0, _NoiseModel(0, _kappa(measured["fe"])))
+    auto = measure(mesh, bump_scene.images, bump_scene.cameras, solver,
+                   MeasurementSettings(scales=(0,)))
+    error = _error(bump_scene, auto)
+    assert error <= 1.3 * _error(bump_scene, measured["tikhonov 5"]), error
+    assert error < _error(bump_scene, measured["fe"])
+    assert error < 0.5 * _error(bump_scene, measured["tikhonov 30"])
+    assert set(solver.lambdas) == {0} and solver.chosen_lengths_mm[0] in solver.grid_mm
+
+
+class _Spy(TikhonovSolver):
+    """Records the weight of every step and the H of the first step of each scale."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.steps, self.first_H = [], {}
+
+    def solve(self, H, b, q, scale):
+        self.first_H.setdefault(scale, H.copy())
+        d = super().solve(H, b, q, scale)
+        self.steps.append((scale, self.last_lambda))
+        return d
+
+
+def test_multiscale_weight_is_fixed_per_scale_and_weakens_on_finer_images(bump_scene, mesh):
+    """Through driver.measure with scales (1, 0) and a 5 mm length: every step of a scale
+    uses that scale's weight, the cosine-probe weight of 10 mm (scale 1) and 5 mm (scale 0)
+    from the scale's first H (Remark 3)."""
+    solver = _Spy(mesh, 5.0)
+    m = measure(mesh, bump_scene.images, bump_scene.cameras, solver,
+                MeasurementSettings(scales=(1, 0)))
+    assert m.ok, m.failure
+    assert solver.chosen_lengths_mm == {1: 10.0, 0: 5.0}
+    for s in (1, 0):
+        weights = {lam for scale, lam in solver.steps if scale == s}
+        assert weights == {solver.lambdas[s]}
+        assert solver.lambdas[s] == pytest.approx(
+            tikhonov_weight(solver.first_H[s], solver.A, mesh.nodes, 5.0 * 2 ** s), rel=1e-12)
+    assert all(sum(1 for scale, _ in solver.steps if scale == s) >= 2 for s in (1, 0))

@@ -67,15 +67,15 @@ def test_compare_georeg_beats_fe_and_every_tikhonov_length_against_the_truth(com
     summary, errors = compare_run
     labels = [m["label"] for m in summary["methods"]]
     assert labels == ["FE (multiscale)", "Tikhonov 5 mm", "Tikhonov 10 mm", "Tikhonov 20 mm",
-                      "georeg (multiscale)", "georeg (monoscale)"]
+                      "georeg 3 levels (multiscale)", "georeg 3 levels (monoscale)"]
     assert summary["truth_available"] is False            # compare knows no truth: we do
     for k in (0, 1):                                        # unbounded, bounded alignment
-        geo, fe = errors["georeg (multiscale)"][k], errors["FE (multiscale)"][k]
+        geo, fe = errors["georeg 3 levels (multiscale)"][k], errors["FE (multiscale)"][k]
         tik = {label: e[k] for label, e in errors.items() if label.startswith("Tikhonov")}
         assert all(geo < e for e in tik.values()), (geo, tik)
         assert geo <= report.FE_ERROR_RATIO * fe, (geo, fe)
     # and it is accurate in absolute terms: < 1 % of the 1 mm twist (0.045 px at 0.22 mm/px)
-    assert errors["georeg (multiscale)"][1] < 0.01
+    assert errors["georeg 3 levels (multiscale)"][1] < 0.01
 
 
 def test_compare_multiscale_is_at_least_as_good_as_monoscale(compare_run):
@@ -85,11 +85,11 @@ def test_compare_multiscale_is_at_least_as_good_as_monoscale(compare_run):
     """
     summary, errors = compare_run
     by = {m["label"]: m for m in summary["methods"]}
-    multi, mono = by["georeg (multiscale)"], by["georeg (monoscale)"]
+    multi, mono = by["georeg 3 levels (multiscale)"], by["georeg 3 levels (monoscale)"]
     assert multi["scales"] == [2, 1, 0] and mono["scales"] == [0]
     assert multi["converged"] and mono["converged"]
     assert multi["residual_percent"] <= mono["residual_percent"] * (1 + report.RESIDUAL_RTOL)
-    assert errors["georeg (multiscale)"][1] <= 1.05 * errors["georeg (monoscale)"][1]
+    assert errors["georeg 3 levels (multiscale)"][1] <= 1.05 * errors["georeg 3 levels (monoscale)"][1]
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_demo_end_to_end_at_half_size_passes_the_shape_claim(demo_run):
         else:
             assert m["name"] == "fe" and "diverged" in m["failure"], m
             assert summary["failed_methods"] == [m["label"]]
-    georeg = methods["georeg (multiscale)"]
+    georeg = methods["georeg 3 levels (multiscale)"]
     assert georeg["status"] == "ok"
     tikhonov = [m["shape_rms_error_mm"] for m in summary["methods"] if m["name"] == "tikhonov"]
     assert georeg["shape_rms_error_mm"] < min(tikhonov), (georeg, tikhonov)

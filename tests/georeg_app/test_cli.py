@@ -53,7 +53,7 @@ def test_bad_config_exits_1_with_one_line_naming_the_key(tmp_path, capsys, comma
     code = cli.main([command, str(_config(tmp_path, levels='"three"')), "--out", str(out)])
     line = _one_error_line(capsys.readouterr().err)
     assert code == 1
-    assert '[method] levels: expected an integer, got "three"' in line
+    assert '[method] levels: expected an integer or "auto", got "three"' in line
     assert not out.exists() and "Traceback" not in line
 
 
@@ -69,7 +69,7 @@ def test_subprocess_exit_status_and_verbose_traceback(tmp_path):
     quiet = subprocess.run([sys.executable, "-m", "georeg_app", "measure", str(config), "--out", str(out)],
                            capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert quiet.returncode == 1 and quiet.stdout == ""
-    assert "[method] levels: must be >= 1, got 0" in _one_error_line(quiet.stderr)
+    assert '[method] levels: must be >= 1 or "auto", got 0' in _one_error_line(quiet.stderr)
     verbose = subprocess.run([sys.executable, "-m", "georeg_app", "measure", str(config), "--verbose"],
                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert verbose.returncode == 1 and "Traceback" in verbose.stderr

@@ -83,6 +83,21 @@ def test_single_tikhonov_length_and_default_sections(tmp_path):
     assert c.output.dir == tmp_path / config_module.DEFAULT_OUTPUT_DIR
 
 
+def test_automatic_levels_and_tikhonov_length(tmp_path):
+    """levels = "auto" (the default) starts from start_levels fixed levels; "auto" can stand
+    among the Tikhonov lengths; the methods of compare follow."""
+    from georeg_app.methods import default_specs
+    text = GOOD.split("[method]")[0] + ('[method]\nlevels = "auto"\nstart_levels = 2\n'
+                                        'tikhonov_length_mm = [5, "auto"]\n')
+    c = load_config(_write(tmp_path, text))
+    assert c.method.levels == "auto" and c.method.fixed_levels == 2
+    assert c.method.tikhonov_length_mm == (5.0, "auto")
+    labels = [s.label for s in default_specs(c)]
+    assert labels == ["FE (multiscale)", "Tikhonov 5 mm", "Tikhonov auto", "georeg auto (multiscale)",
+                      "georeg 2 levels (multiscale)", "georeg 2 levels (monoscale)"]
+    assert config_module.MethodConfig().levels == "auto"
+
+
 @pytest.mark.parametrize("old, new, expected", [
     ("hole_radius_mm = 14.0", "radius = 14.0",
      "[geometry] radius: unknown key (did you mean hole_radius_mm?)"),
@@ -95,17 +110,17 @@ def test_unknown_key_is_named(tmp_path, old, new, expected):
 
 
 @pytest.mark.parametrize("old, new, expected", [
-    ("levels = 2", 'levels = "three"', '[method] levels: expected an integer, got "three"'),
-    ("levels = 2", "levels = 2.5", "[method] levels: expected an integer, got 2.5"),
-    ("levels = 2", "levels = true", "[method] levels: expected an integer, got true"),
+    ("levels = 2", 'levels = "three"', '[method] levels: expected an integer or "auto", got "three"'),
+    ("levels = 2", "levels = 2.5", '[method] levels: expected an integer or "auto", got 2.5'),
+    ("levels = 2", "levels = true", '[method] levels: expected an integer or "auto", got true'),
     ("calibrate = false", 'calibrate = "no"', '[method] calibrate: expected true or false, got "no"'),
     ("length_mm = 100.0", 'length_mm = "100"', '[geometry] length_mm: expected a number (mm), got "100"'),
     ("tikhonov_length_mm = [5, 10.5]", 'tikhonov_length_mm = [5, "x"]',
-     "[method] tikhonov_length_mm: expected a number or a list of numbers"),
+     '[method] tikhonov_length_mm: expected a number, "auto" or a list of them'),
     ('cam0 = "img/left.tif"', "cam0 = 3", "[images] cam0: expected a file path (string), got 3"),
     ('name = "tikhonov"', 'name = "pgd"', '[method] name: must be one of "fe", "tikhonov", "georeg"'),
     ("hole_radius_mm = 14.0", "hole_radius_mm = 25.0", "[geometry] hole_radius_mm: must be > 0 and < "),
-    ("levels = 2", "levels = 0", "[method] levels: must be >= 1, got 0"),
+    ("levels = 2", "levels = 0", '[method] levels: must be >= 1 or "auto", got 0'),
 ])
 def test_wrong_type_or_value_is_named(tmp_path, old, new, expected):
     assert expected in _error(tmp_path, GOOD.replace(old, new))

@@ -95,6 +95,9 @@ BAD = {
                           st.integers(-2 ** 63, 0)),
     "number": st.one_of(_not_a_number, _non_finite),
     "count": st.one_of(_not_an_integer, st.integers(-2 ** 63, 0)),
+    "count_or_auto": st.one_of(_not_an_integer, st.integers(-2 ** 63, 0)).filter(lambda v: v != "auto"),
+    "non_negative": st.one_of(_not_a_number, _non_finite, st.floats(max_value=-1e-9),
+                              st.integers(-2 ** 63, -1)),
     "boolean": st.one_of(_int, _float, _text, st.lists(_nested, max_size=3), _table),
     "string": _not_a_string,
     "path": st.one_of(_not_a_string, _text.map(lambda s: "missing/" + s)),
@@ -102,6 +105,7 @@ BAD = {
                            st.floats(max_value=0.0), st.integers(-2 ** 63, 0),
                            st.lists(st.one_of(_not_a_number, _non_finite,
                                               st.floats(max_value=0.0)), min_size=1, max_size=3)),
+    "positives_or_auto": None,           # set below, from "positives"
     "vector3": _bad_vector(3),
     "vector2": _bad_vector(2),
     "count_pair": st.one_of(_not_a_number, _bad_vector(2),
@@ -123,6 +127,10 @@ BAD = {
                                                        challenge_config.FEATURE_KINDS,
                                                        challenge_config.NOMINAL_KINDS)},
 }
+
+
+BAD["positives_or_auto"] = BAD["positives"].filter(
+    lambda v: "auto" not in (v if isinstance(v, list) else [v]))
 
 
 def _enum(choices):
@@ -208,17 +216,18 @@ def _assert_one_config_error(read, path: Path, folder: Path) -> None:
 # --------------------------------------------------------------------------- georeg
 _GEOMETRY = {"kind": "plate_with_hole", "length_mm": 100.0, "width_mm": 50.0,
              "hole_radius_mm": 14.0, "elements": 300}
-_METHOD = {"name": "georeg", "levels": 3, "scales": 3, "tikhonov_length_mm": [5.0, 10.0],
-           "calibrate": True, "keep_stereo": True, "normalisation": "element",
-           "max_fixed_point": 10}
+_METHOD = {"name": "georeg", "levels": 3, "start_levels": 3, "scales": 3,
+           "tikhonov_length_mm": [5.0, 10.0], "calibrate": True, "keep_stereo": True,
+           "normalisation": "element", "max_fixed_point": 10, "prefilter_px": 0.5}
 _TOP_KEYS = {"images", "cameras", "landmarks", "geometry", "method", "output"}
 _COMMON_VALUES = {
     ("images", "cam0"): "path", ("images", "cam1"): "path",
     ("geometry", "kind"): _enum(GEOMETRY_KINDS), ("geometry", "length_mm"): "positive",
     ("geometry", "width_mm"): "positive", ("geometry", "hole_radius_mm"): "positive",
     ("geometry", "elements"): "count",
-    ("method", "name"): _enum(METHOD_NAMES), ("method", "levels"): "count",
-    ("method", "scales"): "count", ("method", "tikhonov_length_mm"): "positives",
+    ("method", "name"): _enum(METHOD_NAMES), ("method", "levels"): "count_or_auto",
+    ("method", "start_levels"): "count", ("method", "prefilter_px"): "non_negative",
+    ("method", "scales"): "count", ("method", "tikhonov_length_mm"): "positives_or_auto",
     ("method", "calibrate"): "boolean", ("method", "keep_stereo"): "boolean",
     ("method", "normalisation"): _enum(NORMALISATIONS), ("method", "max_fixed_point"): "count",
     ("output", "dir"): "string"}

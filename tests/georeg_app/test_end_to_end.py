@@ -185,9 +185,7 @@ def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
 
 def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsys, monkeypatch):
     """One method breaks inside (its step solver raises a singular system): `georeg compare`
-    marks it failed in summary.json and the report, writes the others, and exits 0.
-    Tikhonov 5 mm on this coarse mesh (24 elements of 10 mm) is over-regularized: the shape
-    stays nearly flat and the residual is 4.4 times the noise floor, which fails it too."""
+    marks it failed in summary.json and the report, writes the others, and exits 0."""
     from fesdic_core.solvers import SingularSystemError
     from georeg_app import pipeline
 
@@ -196,9 +194,9 @@ def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsy
             raise SingularSystemError("H_FE is numerically singular (test)")
 
     real_solver = pipeline._solver
-    monkeypatch.setattr(pipeline, "_solver", lambda spec, model, levels: Broken()
+    monkeypatch.setattr(pipeline, "_solver", lambda spec, model: Broken()
                         if spec.name == "tikhonov" and spec.param == 10.0
-                        else real_solver(spec, model, levels))
+                        else real_solver(spec, model))
     folder = case[0]
     out = tmp_path / "out"
     assert cli.main(["-q", "compare", str(_config(folder)), "--out", str(out)]) == 0
@@ -206,10 +204,9 @@ def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsy
     status = {m["label"]: (m["status"], m["failure"]) for m in summary["methods"]}
     assert status["Tikhonov 10 mm"] == ("failed", "H_FE is numerically singular (test)")
     assert "Tikhonov 10 mm" in summary["failed_methods"]
-    # (Tikhonov 5 mm on these 10 mm elements cannot bend: its verdict says so too)
-    assert status["Tikhonov 5 mm"][0] == "failed" and "regularization" in status["Tikhonov 5 mm"][1]
     ok = [m for m in summary["methods"] if m["status"] == "ok"]
-    assert {m["name"] for m in ok} == {"fe", "tikhonov", "georeg"} and len(ok) == 4
+    assert {m["name"] for m in ok} == {"fe", "tikhonov", "georeg"}
+    assert len(ok) == len(summary["methods"]) - 1                       # only the broken one
     assert all((out / m["mesh_file"]).is_file() for m in ok)
     assert "Tikhonov 10 mm" in capsys.readouterr().err                  # warned
     assert "failed" in (out / "report.html").read_text()

@@ -12,12 +12,17 @@ from georeg_app.outputs import (OutputWriter, summary_dict, write_all, write_byt
                                 write_json_atomic, write_text_atomic)
 from georeg_app_fakes import fake_run
 
-SCHEMA = {"name": str, "param": (float, type(None)), "shape_rms_error_mm": (float, type(None)),
+SCHEMA = {"name": str, "param": (float, str, type(None)), "shape_rms_error_mm": (float, type(None)),
           "distance_to_bfp_rms_mm": float, "residual_percent": float, "iterations": int,
           "time_s": float, "mesh_file": str}
 EXTRA = {"label": str, "converged": bool, "scales": list, "status": str,
          "failure": (str, type(None)), "noise_percent": (float, type(None)),
-         "residual_to_noise": (float, type(None)), "scale_reports": list}
+         "residual_to_noise": (float, type(None)), "scale_reports": list,
+         # issue 10: the uncertainty and what the method chose from the data
+         "shape_std_median_mm": (float, type(None)), "shape_std_max_mm": (float, type(None)),
+         "shape_bias_median_mm": (float, type(None)), "shape_bias_max_mm": (float, type(None)),
+         "noise_variance": (float, type(None)), "levels_chosen": (dict, type(None)),
+         "regularization": (dict, type(None))}
 
 
 def _tiny_figures():

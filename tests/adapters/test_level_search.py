@@ -1,0 +1,84 @@
+"""The ladder of nested spline levels and the pieces of the level search (no images)."""
+import numpy as np
+import pytest
+import scipy.sparse as sps
+
+from adapters.fesdic_core import multilevel_for_mesh, nominal_model
+from adapters.level_search import ladder
+from georeg_plugin.geometries import plate_with_hole, rectangle
+from georeg_plugin.selection import information_criterion, noise_gain, predicted_fit
+from georeg_plugin.solver import GeometricRegularization
+
+
+def test_ladder_of_a_dyadic_mesh_is_the_paper_space_plus_nothing():
+    """plate_with_hole refined 3 times: the ladder is the 4 dyadic levels of Eq. 28, the
+    finest one the FE mesh's own spline (the knot spans are the elements)."""
+    model = nominal_model(plate_with_hole(100.0, 50.0, 14.0), 3, "Q9")
+    space = ladder(model)
+    paper = multilevel_for_mesh(model, 4)
+    assert space.n_levels == 4
+    for C, D in zip(space.operators, paper.operators):
+        assert C.shape == D.shape and abs(C - D).max() < 1e-12
+
+
+def test_ladder_ends_on_the_spline_of_a_non_dyadic_mesh():
+    """24 x 16 elements on a one-element rectangle: dyadic levels 1, 2, 4, 8 spans, then the
+    spline of the 24 x 16 elements (26 x 18 dofs); every level nested in the next (Eq. 13:
+    the coarse operator is a refinement of the fine one, C_c = C_r C_f)."""
+    model = nominal_model(rectangle(60.0, 40.0), (24, 16), "Q9")
+    space = ladder(model)
+    dofs = [C.shape[0] for C in space.operators]
+    assert dofs == [26 * 18, 10 * 10, 6 * 6, 4 * 4, 3 * 3]
+    for s in range(space.n_levels - 1):                  # C_{s+1} = C_r C_s (Eq. 28)
+        Cr = space.refinement[s]
+        assert abs(Cr @ space.operators[s] - space.operators[s + 1]).max() < 1e-12
+    # the finest level reproduces any quadratic spline of the mesh's knots at the nodes
+    x, y = model.mesh.nodes[:, 0], model.mesh.nodes[:, 1]
+    q = 0.01 * x * y + 0.002 * x ** 2
+    solver = GeometricRegularization(space)
+    assert np.max(np.abs(solver.to_nodes(solver.control_values(q, 0), 0) - q)) < 1e-10
+
+
+def test_predicted_fit_is_exact_for_a_linear_problem():
+    """c(q + d) = |r + Phi^T d|^2 equals c - b.d for the Gauss-Newton step d = G b of any level."""
+    model = nominal_model(rectangle(30.0, 20.0), (6, 4), "Q9")
+    space = ladder(model)
+    rng = np.random.default_rng(0)
+    n = model.mesh.n_nodes
+    Phi = rng.standard_normal((n, 600))                 # 600 "points", a dense design
+    r = rng.standard_normal(600)
+    H, b = sps.csr_matrix(Phi @ Phi.T), -Phi @ r
+    c = float(r @ r)
+    for level in range(space.n_levels):
+        d = GeometricRegularization(space, {0: level}).solve(H, b, np.zeros(n), 0)
+        assert predicted_fit(c, b, d) == pytest.approx(float(np.sum((r + Phi.T @ d) ** 2)), rel=1e-10)
+
+
+def test_criterion_and_gain():
+    assert information_criterion(10.0, 5, 0.5, 1000) == pytest.approx(10.0 + 2.5 * np.log(1000))
+    assert noise_gain(10.0, 4, 7.0, 7, 0.5) == pytest.approx(2.0)      # (10 - 7) / (0.5 * 3)
+    assert np.isnan(noise_gain(10.0, 4, 7.0, 4, 0.5))
+
+
+def test_noise_alone_never_passes_the_criterion():
+    """Pure noise of variance kappa on a linear problem: the gain per added dof is ~1, so
+    the criterion (threshold ln N = 8 here) keeps the coarse level in every draw."""
+    model = nominal_model(rectangle(30.0, 20.0), (8, 8), "Q9")
+    space = ladder(model)
+    rng = np.random.default_rng(1)
+    n = model.mesh.n_nodes
+    Phi = rng.standard_normal((n, 3000)) / np.sqrt(3000)
+    H = sps.csr_matrix(Phi @ Phi.T)
+    kept, gains = 0, []
+    for _ in range(40):
+        r = rng.standard_normal(3000)                    # kappa = 1: Cov(b) = H
+        b = -Phi @ r
+        coarse = GeometricRegularization(space, {0: space.n_levels - 2}).solve(H, b, np.zeros(n), 0)
+        fine = GeometricRegularization(space, {0: space.n_levels - 3}).solve(H, b, np.zeros(n), 0)
+        c = float(r @ r)
+        c0, c1 = predicted_fit(c, b, coarse), predicted_fit(c, b, fine)
+        m0, m1 = space.operators[-2].shape[0], space.operators[-3].shape[0]
+        gains.append(noise_gain(c0, m0, c1, m1, 1.0))
+        kept += information_criterion(c0, m0, 1.0, 3000) <= information_criterion(c1, m1, 1.0, 3000)
+    assert 0.7 < np.mean(gains) < 1.3
+    assert kept == 40

@@ -1,0 +1,80 @@
+"""georeg_app.config: the image model's ``[method] prefilter_px`` (issue 13) and its checks."""
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from fesdic_core.image import DEFAULT_PREFILTER_PX
+from georeg_app.config import ConfigError, MethodConfig, load_config
+
+BASE = """
+[images]
+cam0 = "left.tif"
+cam1 = "right.tif"
+
+[cameras]
+file = "cameras.json"
+
+[geometry]
+kind = "rectangle"
+length_mm = 60.0
+width_mm = 40.0
+
+[method]
+"""
+
+
+def _load(folder: Path, method: str):
+    for name in ("left.tif", "right.tif", "cameras.json"):
+        (folder / name).write_bytes(b"x")
+    path = folder / "config.toml"
+    path.write_text(textwrap.dedent(BASE) + method + "\n")
+    return load_config(path)
+
+
+def test_prefilter_default_is_the_core_default(tmp_path):
+    assert _load(tmp_path, "").method.prefilter_px == DEFAULT_PREFILTER_PX
+    assert MethodConfig().prefilter_px == DEFAULT_PREFILTER_PX
+
+
+@pytest.mark.parametrize("text, value", [("prefilter_px = 0.7", 0.7), ("prefilter_px = 0", 0.0),
+                                         ("prefilter_px = 1", 1.0)])
+def test_prefilter_is_read(tmp_path, text, value):
+    m = _load(tmp_path, text).method
+    assert m.prefilter_px == value and isinstance(m.prefilter_px, float)
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("prefilter_px = -0.5", "[method] prefilter_px: must be >= 0 (px; 0 = no prefilter), got -0.5"),
+    ("prefilter_px = nan", "[method] prefilter_px: expected a number (px), got nan"),
+    ("prefilter_px = inf", "[method] prefilter_px: expected a number (px), got inf"),
+    ('prefilter_px = "0.7"', '[method] prefilter_px: expected a number (px), got "0.7"'),
+    ("prefilter_px = true", "[method] prefilter_px: expected a number (px), got true"),
+    ("prefilter = 0.7", "[method] prefilter: unknown key (did you mean prefilter_px?)"),
+])
+def test_bad_prefilter_is_refused_naming_the_key(tmp_path, text, expected):
+    with pytest.raises(ConfigError) as info:
+        _load(tmp_path, text)
+    message = str(info.value)
+    assert expected in message and "config.toml" in message and "\n" not in message
+
+
+def test_the_pipeline_reads_the_images_with_the_configured_prefilter(tmp_path, monkeypatch):
+    from georeg_app import pipeline
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_read_image(path, prefilter_px):
+        seen.append((Path(path).name, prefilter_px))
+        if len(seen) == 2:
+            raise Stop
+        return None
+
+    monkeypatch.setattr(pipeline, "read_image", fake_read_image)
+    config = _load(tmp_path, "prefilter_px = 0.7")
+    with pytest.raises(Stop):
+        pipeline.run_methods(config, [])
+    assert seen == [("left.tif", 0.7), ("right.tif", 0.7)]
