@@ -38,3 +38,16 @@ def small_demo_scene():
 def bump_scene():
     """Flat plate with a 0.3 mm, sigma 2 mm bump, 480 x 320 px, noise 2 (scenes.py)."""
     return scenes.bump_scene()
+
+
+@pytest.fixture(scope="session")
+def family_scenes():
+    """``get(divisor)``: the family's flat plate (None) or Gaussian bump of sigma = width /
+    divisor, rendered once per session on first use (scenes.py ``FAMILY``)."""
+    cache = {}
+
+    def get(divisor):
+        if divisor not in cache:
+            cache[divisor] = scenes.family_scene(divisor)
+        return cache[divisor]
+    return get

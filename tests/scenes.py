@@ -69,3 +69,58 @@ def bump_scene() -> Scene:
     specimen = bump_specimen(speckle_mm_for(cameras[0], 4.0))
     arrays = render_stereo(specimen, cameras, supersample=3, noise_std=2.0, seed=2, progress=False)
     return Scene(specimen, tuple(cameras), tuple(arrays))
+
+
+# ----------------------------------------------------------------------------- the family
+#: the shape family of issue 10 item 4 ("never worse than plain FE"): one square 60 mm plate
+#: seen by the demo's rig (two cameras at 25 deg, 400 mm), 4 px speckle, noise of 2 gray
+#: levels, pixel-integrated by 3 x 3 rays (as the scenes above). Its shapes: flat, or a
+#: Gaussian bump of amplitude 0.5 mm and sigma = width / divisor (divisors 2 to 20: from
+#: half the plate's width, a dome, down to a twentieth, 3 mm), centred off the plate's
+#: centre. The FE mesh that goes with it (``elements``, Q9) has elements of 1.5 mm, half
+#: the narrowest sigma, and 16 px per element side: 40 x 40 elements over 640 x 640 px of
+#: plate (0.094 mm/px, about the demo's 0.1 mm/px), images of 704 x 736 px.
+FAMILY = dict(length_mm=60.0, width_mm=60.0, amplitude_mm=0.5, centre_mm=(6.0, 3.0),
+              divisors=(2, 5, 10, 20), elements=(40, 40), pixel_mm=1.5 / 16,
+              image_size=(704, 736), stereo_angle_deg=25.0, speckle_px=4.0, noise_std=2.0,
+              supersample=3, seed=5, noise_seed=2)
+
+#: the same family at the demo's scale (0.1 mm/px, 1200 x 1000 px images): a 96 x 80 mm
+#: plate, sigma from 40 down to 4 mm, a 48 x 40 Q9 mesh of 2 mm elements (20 px each)
+FAMILY_DEMO_SCALE = dict(FAMILY, length_mm=96.0, width_mm=80.0, centre_mm=(9.6, 4.0),
+                         elements=(48, 40), pixel_mm=0.1, image_size=(1200, 1000))
+
+
+def family_cameras(family: dict = FAMILY) -> tuple:
+    """The family's exact stereo rig: the demo's cameras at ``pixel_mm`` per pixel."""
+    return demo_cameras(image_size=family["image_size"],
+                        stereo_angle_deg=family["stereo_angle_deg"],
+                        field_mm=family["image_size"][0] * family["pixel_mm"])
+
+
+def family_sigma(divisor: int, family: dict = FAMILY) -> float:
+    """The bump's sigma (mm): the plate's width over ``divisor``."""
+    return family["width_mm"] / float(divisor)
+
+
+def family_specimen(divisor: int | None, speckle_mm: float, family: dict = FAMILY) -> Specimen:
+    """The family's plate: flat (``divisor`` None) or with the bump of sigma = width / divisor."""
+    if divisor is None:
+        return Specimen(family["length_mm"], family["width_mm"], speckle_mm=speckle_mm,
+                        seed=family["seed"])
+    bump = dict(amplitude=family["amplitude_mm"], sigma=family_sigma(divisor, family),
+                centre=family["centre_mm"])
+    return Specimen(family["length_mm"], family["width_mm"],
+                    height=functools.partial(_bump, **bump),
+                    height_gradient=functools.partial(_bump_gradient, **bump),
+                    speckle_mm=speckle_mm, seed=family["seed"])
+
+
+def family_scene(divisor: int | None, family: dict = FAMILY) -> Scene:
+    """One shape of the family rendered by the core's ray caster (same speckle and noise
+    seeds for every shape: the shapes differ by their surface only)."""
+    cameras = family_cameras(family)
+    specimen = family_specimen(divisor, speckle_mm_for(cameras[0], family["speckle_px"]), family)
+    arrays = render_stereo(specimen, cameras, supersample=family["supersample"],
+                           noise_std=family["noise_std"], seed=family["noise_seed"], progress=False)
+    return Scene(specimen, tuple(cameras), tuple(arrays))

@@ -1,0 +1,167 @@
+"""Issue 10, item 4: geometric regularization with automatic levels is never worse than plain FE.
+
+On each shape of a family with known truth (tests/scenes.py), the level search
+(:func:`adapters.level_search.measure_auto_levels`, 3 start levels) is compared with the
+core's plain FE and with Tikhonov at fixed lengths (5, 10, 20 mm), all on the same FE
+mesh, images and settings; the error is the RMS distance of the measured nodes to the true
+surface after the bounded rigid alignment (tests/shape_truth.py).
+
+Cases: the demo's twisted open-hole plate with waviness (``small_demo_scene``, the NURBS
+plate with a hole, 256 Q9 elements, scales (2, 1, 0)), and the family ``scenes.FAMILY``
+(a 60 x 60 mm plate, 40 x 40 Q9 elements of 1.5 mm, 704 x 736 px, scales (1, 0)): flat,
+and a 0.5 mm Gaussian bump of sigma = width / 2, / 5 and / 20 (30, 12 and 3 mm). Tikhonov
+also with the length chosen from the data ("auto") where the core has it.
+
+FE and Tikhonov run with ``uncertainty=False``: their shape and verdict do not depend on
+it. The level search needs it (its noise model).
+
+Measured (um; georeg auto: chosen level / levels in the ladder, spline dofs; the core's
+information criterion and 0.5 px prefilter of the image model):
+
+=========== ======= ======= ======= ======= ======= ===================
+case          FE     T 5mm  T 10mm  T 20mm  T auto    georeg auto
+=========== ======= ======= ======= ======= ======= ===================
+twisted      16.02    6.86   10.75   28.39    8.60   2.74 (1/4, 120)
+flat          9.06    2.83    1.84    1.17    3.82   2.79 (1/5, 100)
+sigma W/2     9.06    2.98    3.80    8.81    3.79   2.76 (1/5, 100)
+sigma W/5     8.19    2.68    5.07   16.17    3.15   2.30 (1/5, 100)
+sigma W/20    9.06    4.79   10.98   22.21    4.13   5.83 (0/5, 1764)
+=========== ======= ======= ======= ======= ======= ===================
+
+Never worse than FE: holds on every case. Not worse than the best Tikhonov length: holds
+on the twisted plate and the 30 and 12 mm bumps; not on the flat plate (2.79 um against
+Tikhonov 20 mm's 1.17; 2 fixed levels: 1.27) and not on the 3 mm bump (5.83 against
+Tikhonov auto's 4.13): strict xfails below. The search takes the spline of the FE mesh for
+the 3 mm bump and level 1 (8 x 8 knot spans) for the flat plate.
+
+Why: (1) the ladder of the 40 x 40 mesh jumps from 8 x 8 knot spans (100 dofs, 14.7 um on
+the 3 mm bump) to the mesh's own 40 x 40 (1764 dofs): 16 does not divide 40; (2) the
+renders' misfit. At the TRUE shape one FE step would lower the cost by b^T H^-1 b = 3.5
+to 6 kappa per FE dof on these renders (benchmarks/bench_levels.py, column "misfit"),
+where images that differ from the truth by their noise only give 1: the renders integrate
+each pixel by 3 x 3 point samples of a 4 px speckle (texels of 0.67 px), the FE mesh fits
+that systematic misfit and a criterion counts it as shape: the flat plate's search stops
+at 100 dofs where 2 fixed levels (16 dofs) give 1.27 um. The independent rasteriser
+riley-raster, 4 x 4 sub-pixels, gives the same verdicts at this scale (misfit 4.8 to 6.7).
+
+Time: four renders of 704 x 736 px and 30 measurements, 89 s CPU; 88 s wall with another
+process sharing the 2 cores (41 s on the idle machine before Tikhonov "auto" was added).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+import scenes
+from adapters.fesdic_core import nominal_model
+from adapters.level_search import measure_auto_levels
+from fesdic_core.driver import MeasurementSettings, measure
+from fesdic_core.tikhonov import TikhonovSolver
+from georeg_plugin.geometries import plate_with_hole, rectangle
+from shape_truth import bounded_shape_error, rms
+
+TIKHONOV_MM = (5.0, 10.0, 20.0)
+START_LEVELS = 3
+
+#: case -> (divisor of the family, None for flat; "twisted" for the demo's plate)
+CASES = {"twisted": "twisted", "flat": None, "sigma_W/2": 2, "sigma_W/5": 5, "sigma_W/20": 20}
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    errors_um: dict          # method -> RMS error (um)
+    ok: dict                 # method -> Measurement.ok
+    chosen: int              # the level the search chose (0 = the spline of the FE mesh)
+    start: int
+    n_levels: int
+    dofs: int                # spline dofs of the chosen level
+
+    @property
+    def best_tikhonov(self) -> tuple[str, float]:
+        return min(((k, v) for k, v in self.errors_um.items() if k.startswith("tikhonov")),
+                   key=lambda kv: kv[1])
+
+    def table(self) -> str:
+        return ", ".join(f"{k} {v:.2f}" for k, v in self.errors_um.items()) + \
+            f" um; level {self.chosen}/{self.n_levels} ({self.dofs} dofs)"
+
+
+def _tikhonov_solvers(mesh) -> dict:
+    solvers = {f"tikhonov {length:g} mm": TikhonovSolver(mesh, length) for length in TIKHONOV_MM}
+    try:                                  # the length chosen from the data, where the core has it
+        solvers["tikhonov auto"] = TikhonovSolver(mesh, "auto")
+    except (TypeError, ValueError):
+        pass
+    return solvers
+
+
+def _run(scene, model, settings: MeasurementSettings) -> Outcome:
+    images, cameras, truth = scene.images, scene.cameras, scene.specimen
+    geo, solver, search = measure_auto_levels(model, images, cameras, settings,
+                                              start_levels=START_LEVELS)
+    reference = dataclasses.replace(settings, uncertainty=False)
+    runs = {"georeg auto": geo, "fe": measure(model.mesh, images, cameras, None, reference)}
+    for name, tikhonov in _tikhonov_solvers(model.mesh).items():
+        runs[name] = measure(model.mesh, images, cameras, tikhonov, reference)
+    errors = {k: 1e3 * rms(bounded_shape_error(m.nodes, truth)) for k, m in runs.items()}
+    return Outcome(errors, {k: m.ok for k, m in runs.items()}, search.chosen, search.start,
+                   search.n_levels, int(solver.operator(search.chosen).shape[0]))
+
+
+@pytest.fixture(scope="module")
+def outcome(request, small_demo_scene, family_scenes):
+    cache = {}
+
+    def get(case: str) -> Outcome:
+        if case not in cache:
+            if CASES[case] == "twisted":
+                model = nominal_model(plate_with_hole(100.0, 50.0, 14.0), 3, "Q9")
+                cache[case] = _run(small_demo_scene, model, MeasurementSettings(scales=(2, 1, 0)))
+            else:
+                f = scenes.FAMILY
+                model = nominal_model(rectangle(f["length_mm"], f["width_mm"]), f["elements"], "Q9")
+                cache[case] = _run(family_scenes(CASES[case]), model,
+                                   MeasurementSettings(scales=(1, 0)))
+        return cache[case]
+    return get
+
+
+def _xfail(reason: str):
+    return pytest.mark.xfail(strict=True, reason=reason)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_every_measurement_is_ok(outcome, case):
+    result = outcome(case)
+    assert all(result.ok.values()), result.ok
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_automatic_level_is_not_worse_than_fe(outcome, case):
+    result = outcome(case)
+    assert result.errors_um["georeg auto"] <= result.errors_um["fe"], result.table()
+
+
+@pytest.mark.parametrize("case", [
+    "twisted",
+    pytest.param("flat", marks=_xfail(
+        "the search stops at level 1 (100 dofs): 2.79 um against Tikhonov 20 mm's 1.17 um "
+        "(2 fixed levels: 1.27 um); the renders' misfit (3 x 3 rays per pixel) reads as shape")),
+    "sigma_W/2",
+    "sigma_W/5",
+    pytest.param("sigma_W/20", marks=_xfail(
+        "the search takes the FE mesh's spline (1764 dofs): 5.83 um against Tikhonov auto's "
+        "4.13 um (5 mm: 4.79 um); the ladder has no level between 8 x 8 knot spans (100 dofs, "
+        "14.7 um) and the mesh's 40 x 40")),
+])
+def test_automatic_level_is_not_worse_than_the_best_tikhonov_length(outcome, case):
+    result = outcome(case)
+    name, best = result.best_tikhonov
+    assert result.errors_um["georeg auto"] <= best, (name, result.table())
+
+
+def test_the_narrow_bump_gets_a_finer_level_than_the_flat_plate(outcome):
+    flat, narrow = outcome("flat"), outcome("sigma_W/20")
+    assert flat.start == narrow.start
+    assert narrow.chosen < flat.chosen, (narrow.table(), flat.table())
