@@ -38,7 +38,7 @@ the predictions, the iterations at finer levels and the final measurement at the
 level) relative to G3. Under a shared machine's load the difference is the noisier one.
 
 Renderers (``--renderer``): ``core`` (fesdic_core.render: ray casting onto z = h(x, y),
-bilinear texture, 3 x 3 rays per pixel) and ``riley`` (riley-raster, PyPI, a Zig
+bilinear texture, ``--supersample`` rays per pixel, default the family's 6 x 6) and ``riley`` (riley-raster, PyPI, a Zig
 rasteriser of FE surface meshes for DIC uncertainty studies: the surface as a fine quad9
 mesh with nodes on the truth, element maps inverted by Newton per sub-pixel, Catmull-Rom
 texture sampling, 4 x 4 sub-pixels per pixel, box pixel), the same speckle texture, the
@@ -48,24 +48,17 @@ run this script with that venv's python. With ``riley`` the script first checks 
 camera conversion: a flat plate rendered by riley with bilinear sampling and the core's
 sub-pixel grid must equal the core's render.
 
-Measured (2 cores shared with other work, load average 3 to 9; the full tables are printed
-by the commands below):
-
-- never worse than FE: auto <= FE on every shape, both renderers, both scales;
-- not worse than the best fixed Tikhonov length: only on the twisted plate (both renderers,
-  both scales) and, with riley at the demo's scale, on the 4 mm bump (1.98 against 2.18 um);
-- with the core's renders (3 x 3 rays per pixel) the search climbs to the FE mesh's spline
-  on every family shape, flat included (demo scale: 9.15 um on the flat plate, against
-  3.05 for Tikhonov 10 mm and 1.29 for 2 fixed levels; misfit 4.8 to 9.4); with riley at
-  the demo's scale (misfit 1.3 to 1.5 on the flat plate and the narrow bumps) it stops at
-  level 1 (100 dofs) on the flat plate and at the mesh's spline on the bumps;
-- the search's added time over 3 fixed levels: 0 to 12 % where it stays on its start
-  level (the twisted plate), 100 to 210 % (medians of 3 runs) where it climbs (the final
-  measurement at the 2100-dof level, with its shape uncertainty, is most of it): above the
-  50 % target.
+Measured: the tests' scale (``--quick``, core renderer with 6 x 6 rays per pixel) on the
+final level search (information criterion, ladder halving the FE mesh's knots, 0.5 px
+prefilter) is the table of tests/adapters/test_never_worse_than_fe.py and README "Level
+choice": auto <= FE on every shape, <= the best Tikhonov length on all but the flat plate
+(0.19 um against Tikhonov auto's 0.04). An earlier state of the search (Mallows' Cp, a
+ladder jumping from 8 x 8 knot spans to the mesh, 3 x 3 rays) climbed to the mesh's spline
+on every family shape and added 100-240 % to the time of 3 fixed levels where it climbed;
+the demo-scale and riley tables were measured on that state and are to be re-run.
 
 Run: ``python benchmarks/bench_levels.py [--quick] [--renderer core|riley|both] [--repeat 3]
-[--shapes twisted flat 2 5 10 20] [--supersample 3] [--riley-subsample 4]``
+[--shapes twisted flat 2 5 10 20] [--supersample 6] [--riley-subsample 4]``
 """
 from __future__ import annotations
 
