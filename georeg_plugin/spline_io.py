@@ -95,18 +95,13 @@ def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
            "knots": [np.asarray(k, dtype=float).tolist() for k in patch.knots],
            "control_points": cp.tolist(),
            "weights": None if w is None else w.tolist()}
-    if scalar_field is not None:
-        f = np.asarray(scalar_field, dtype=float)
-        if f.size != nu * nv:
-            raise ValueError(f"scalar_field has {f.size} values, the patch has "
-                             f"{nu} x {nv} control points")
-        doc["scalar_field"] = f.reshape(nu, nv).tolist()
-    if scalar_field_std is not None:
-        f = np.asarray(scalar_field_std, dtype=float)
-        if f.size != nu * nv:
-            raise ValueError(f"scalar_field_std has {f.size} values, the patch has "
-                             f"{nu} x {nv} control points")
-        doc["scalar_field_std"] = f.reshape(nu, nv).tolist()
+    for name, field in (("scalar_field", scalar_field), ("scalar_field_std", scalar_field_std)):
+        if field is not None:
+            f = np.asarray(field, dtype=float)
+            if f.size != nu * nv:
+                raise ValueError(f"{name} has {f.size} values, the patch has "
+                                 f"{nu} x {nv} control points")
+            doc[name] = f.reshape(nu, nv).tolist()
     _atomic_write_text(pathlib.Path(path), json.dumps(doc, indent=1) + "\n")
     logger.info("wrote spline %s (%d x %d control points)", path, nu, nv)
 

@@ -52,7 +52,11 @@ def compare_run(small_demo_scene, tmp_path_factory):
     summary = json.loads((out / "summary.json").read_text())
     errors = {}
     for m in summary["methods"]:
-        points = meshio.read(out / m["mesh_file"]).points
+        mesh = meshio.read(out / m["mesh_file"])
+        points = mesh.points
+        std = mesh.point_data["shape_std_mm"]               # every method writes its std map
+        assert np.all(np.isfinite(std)) and np.all(std >= 0) and std.max() > 0, m["label"]
+        assert m["shape_std_median_mm"] == pytest.approx(np.median(std))
         errors[m["label"]] = (rms(shape_error_to_surface(points, scene.specimen)),
                               rms(bounded_shape_error(points, scene.specimen)))
     return summary, errors

@@ -184,3 +184,20 @@ def test_written_files_have_a_new_files_permissions_without_touching_the_umask(t
     modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
     assert modes == {"s.json": 0o640, "s.igs": 0o640}             # 0666 less umask, no leftovers
     assert calls == []
+
+
+def test_spline_json_carries_the_std_of_the_control_values(tmp_path):
+    """scalar_field_std (the measured control values' standard deviation) is written beside
+    scalar_field, one value per control point; a wrong size is refused, naming the field."""
+    import json
+    from georeg_plugin.geometries import rectangle
+    from georeg_plugin.spline_io import write_spline_json
+    patch = rectangle(60.0, 40.0)
+    n = int(np.prod(patch.control_points.shape[:2]))
+    path = tmp_path / "s.json"
+    write_spline_json(path, patch, scalar_field=np.arange(n, dtype=float),
+                      scalar_field_std=np.full(n, 0.002))
+    doc = json.loads(path.read_text())
+    assert np.allclose(doc["scalar_field_std"], 0.002) and np.size(doc["scalar_field_std"]) == n
+    with pytest.raises(ValueError, match="scalar_field_std has 2 values"):
+        write_spline_json(path, patch, scalar_field_std=np.ones(2))
