@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Sequence
 
 from . import installed_version
-from .config import Config, load_config
+from .config import load_config
 
 logger = logging.getLogger(__name__)
 

@@ -69,7 +69,7 @@ import numpy as np
 from fesdic_core.image import DEFAULT_PREFILTER_PX
 
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
-                          existing_file, integer, load_toml, number, numbers, resolve_path,
+                          existing_file, integer, load_toml, number, resolve_path,
                           show, string, vector)
 
 logger = logging.getLogger(__name__)
