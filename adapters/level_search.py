@@ -32,6 +32,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from fesdic_core.driver import Measurement, MeasurementSettings, measure
+from fesdic_core.edges import edge_margin_mask
 from fesdic_core.image import pyramid
 from fesdic_core.shape import shape_gauss_newton
 from fesdic_core.solvers import seen_dofs
@@ -210,6 +211,10 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
     cams = [c.scaled(finest) for c in first.cameras]
     quad, normals = first.quadrature, first.normals
+    mask = None                                   # the core's edge margin at the finest scale
+    if settings.edge_margin_px > 0:
+        mask = edge_margin_mask(quad.points(first.nodes), quad, model.mesh, first.nodes, cams,
+                                settings.edge_margin_px / 2.0 ** finest)
 
     def residual_of(chi: float, state) -> float:                 # std scales like sqrt(c)
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
@@ -245,10 +250,10 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
                                    cams, solver, finest, settings.normalisation, settings.max_iter,
-                                   settings.tol_mm * 2.0 ** finest)
+                                   settings.tol_mm * 2.0 ** finest, extra_mask=mask)
         iterations += shape.iterations
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
-                                       settings.normalisation)
+                                       settings.normalisation, mask)
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
                           trial_state.residual.std_percent, True, trial_state.n_points)
         trials.append(measured)
