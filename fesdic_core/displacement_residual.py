@@ -243,8 +243,8 @@ def displacement_operators(quad: PixelQuadrature, res: DisplacementResidual
                 G = res.dr_du[c, points].reshape(-1, m, 1, 3)
                 phi = (group.N[None, :, :, None] * G).reshape(-1, m, 3 * nn)   # (e, m, 3nn)
                 wphi = phi * w[c, points].reshape(-1, m, 1)
-                He[span] += wphi.transpose(0, 2, 1) @ phi
-                be[span] -= (res.r[c, points].reshape(-1, 1, m) @ wphi)[:, 0]
+                He[span] += np.einsum("emi,emj->eij", wphi, phi)     # (batched BLAS is slower)
+                be[span] -= np.einsum("em,emi->ei", res.r[c, points].reshape(-1, m), wphi)
 
         for_each_block(element_block, E, max(1, _BLOCK // (4 * m)))
         conn = component_dofs(group.connectivity)
