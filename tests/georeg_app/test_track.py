@@ -187,3 +187,27 @@ def test_every_frame_failing_is_an_error(series, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()      # the frame's warning, then the error
     assert err[-1].startswith("georeg: error: every frame failed: frame 1: ")
     assert "no texture" in err[-1] and not out.exists()
+
+
+@pytest.mark.parametrize("incremental", ["true", "false"])
+def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, incremental):
+    """The series through a distributed.LocalCluster of 2 worker processes gives the serial
+    run's fields to round-off (the same frames, statuses and chain)."""
+    pytest.importorskip("distributed")
+    folder, _ = series
+    config = _config(folder, displacement=f'method = "fe"\nscales = 3\nincremental = {incremental}')
+    runs = {}
+    for scheduler in ("serial", "processes"):
+        out = tmp_path / scheduler
+        assert cli.main(["-q", "track", str(config), "--out", str(out), "--scheduler", scheduler,
+                         "--workers", "2"]) == 0
+        runs[scheduler] = (out, json.loads((out / "summary.json").read_text()))
+    (serial_out, serial), (dask_out, dask) = runs["serial"], runs["processes"]
+    assert dask["scheduler"] == "processes"
+    for a, b in zip(serial["frames"], dask["frames"]):
+        assert (a["status"], a["start_frame"], a["mesh_file"], a["iterations"]) == \
+            (b["status"], b["start_frame"], b["mesh_file"], b["iterations"])
+        if a["mesh_file"]:
+            ua = _point_data(serial_out / a["mesh_file"])["displacement_mm"]
+            ub = _point_data(dask_out / b["mesh_file"])["displacement_mm"]
+            np.testing.assert_allclose(ua, ub, rtol=0, atol=1e-12)
