@@ -43,6 +43,7 @@ from .track_config import TrackConfig
 logger = logging.getLogger(__name__)
 
 __all__ = ["SeriesReference", "FrameResult", "TrackRun", "load_reference", "check_frames",
+           "displacement_solver",
            "series_reference", "measure_frame", "run_series", "run_track"]
 
 
@@ -131,15 +132,20 @@ def load_reference(config: TrackConfig, progress: bool = False
     return mesh, tuple(m.cameras), images, model, f"measured here ({result.spec.label})"
 
 
-def _solver(config: TrackConfig, mesh: SurfaceMesh, model: NominalModel | None):
-    d = config.displacement
-    if d.method == "fe":
+def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | None = None,
+                        tikhonov_length_mm: float = 10.0, levels: int = 2):
+    """The step solver of a displacement method on the node-major dofs: None (plain FE),
+    Tikhonov on each component, or the spline levels of ``model`` on each component
+    (``kron(C_s, I3)``, image scale s -> level min(s, levels - 1))."""
+    if method == "fe":
         return None
-    if d.method == "tikhonov":
-        return ComponentTikhonovSolver(mesh, d.tikhonov_length_mm)
+    if method == "tikhonov":
+        return ComponentTikhonovSolver(mesh, tikhonov_length_mm)
+    if method != "georeg":
+        raise ValueError(f"unknown displacement method {method!r}")
     if model is None:
         raise ValueError("[displacement] method = \"georeg\" needs the spline of the reference")
-    space = multilevel_for_mesh(model, d.levels)
+    space = multilevel_for_mesh(model, levels)
     vector_space = dataclasses.replace(space, operators=tuple(componentwise(C)
                                                               for C in space.operators),
                                        refinement=(), gluing=())
@@ -166,7 +172,9 @@ def series_reference(config: TrackConfig, progress: bool = False) -> SeriesRefer
     settings = DisplacementSettings(scales=config.displacement.scale_sequence,
                                     normalisation=config.method.normalisation)
     reference = displacement_reference(mesh, images, cameras, settings)
-    return SeriesReference(displacement=reference, solver=_solver(config, mesh, model),
+    d = config.displacement
+    solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
+    return SeriesReference(displacement=reference, solver=solver,
                            prefilter_px=config.method.prefilter_px, label=label)
 
 

@@ -29,10 +29,10 @@ def check_scheduler(scheduler: str) -> str:
 
 def run_track_command(args: argparse.Namespace, check_output_folder: Callable,
                       progress: bool) -> Path:
-    """Run ``georeg track``; returns the path of the summary written."""
+    """Run ``georeg track``; returns the path of the report written."""
     from .cli import MeasurementFailed
     from .track import run_track
-    from .track_outputs import SUMMARY_FILE, write_track
+    from .track_outputs import REPORT_FILE, SUMMARY_FILE, write_track
 
     scheduler = check_scheduler(args.scheduler)
     config = load_track_config(args.config)                                   # fail fast
@@ -48,4 +48,4 @@ def run_track_command(args: argparse.Namespace, check_output_folder: Callable,
         logger.warning("%d of %d frames failed (marked in %s): %s", len(failed), len(run.frames),
                        SUMMARY_FILE, ", ".join(str(f.index) for f in failed))
     write_track(out, run, overwrite=args.overwrite)
-    return Path(out) / SUMMARY_FILE
+    return Path(out) / REPORT_FILE

@@ -10,6 +10,7 @@
 - ``displacement.pvd``: the ParaView time series of the frames that succeeded (time = frame
   index).
 - ``summary.json``: :func:`track_summary`.
+- ``report.html``: :mod:`georeg_app.track_report`.
 """
 from __future__ import annotations
 
@@ -22,8 +23,9 @@ import numpy as np
 from fesdic_core.mesh_io import write_mesh
 
 from .outputs import OutputWriter, _json_ready
+from .track_report import REPORT_FILE, track_report_html
 
-__all__ = ["SUMMARY_FILE", "PVD_FILE", "frame_file", "track_summary", "pvd_text", "write_track"]
+__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "frame_file", "track_summary", "pvd_text", "write_track"]
 
 SUMMARY_FILE = "summary.json"
 PVD_FILE = "displacement.pvd"
@@ -96,4 +98,5 @@ def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> lis
                 write_frame_vtu(w.path(name), run.mesh, frame)
         w.write_text(PVD_FILE, pvd_text(run))
         w.write_json(SUMMARY_FILE, track_summary(run))
+        w.write_text(REPORT_FILE, track_report_html(run))
     return w.published

@@ -94,6 +94,8 @@ def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, 
         assert {"residual", "strain_xx", "strain_yy", "strain_xy"} <= set(data)
     stretch = _point_data(out / "frame_0004.vtu")
     assert abs(np.mean(stretch["strain_xx"]) - (0.005 + 0.5 * 0.005 ** 2)) < 1e-4
+    report = (out / "report.html").read_text()
+    assert "FAILED: " in report and "1 frame(s) FAILED (3)" in report and "data:image/png" in report
     pvd = ET.parse(out / "displacement.pvd").getroot()
     assert [d.get("file") for d in pvd.iter("DataSet")] == ["frame_0001.vtu", "frame_0002.vtu",
                                                            "frame_0004.vtu"]
