@@ -32,7 +32,6 @@ Run: ``python benchmarks/bench_displacement.py [--accuracy] [--iteration] [--wor
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import platform
 import statistics
@@ -175,7 +174,6 @@ def workers(counts, n_frames: int) -> None:
     import cv2
 
     from fesdic_core.render import RigidMotion, render_stereo
-    from georeg_app.track_config import DisplacementConfig, TrackConfig
     from georeg_app import cli
 
     cameras, plate = _scene()

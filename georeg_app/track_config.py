@@ -45,7 +45,7 @@ from typing import Any
 
 from .config import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig, OutputConfig,
                      _cameras, _geometry, _images, _method)
-from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check, integer,
+from .toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                           load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",

@@ -4,7 +4,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fesdic_core.displacement_strain import surface_green_lagrange, tangent_frame
-from fesdic_core.mesh import CellBlock, SurfaceMesh, rectangle_mesh
+from fesdic_core.mesh import SurfaceMesh, rectangle_mesh
 
 
 @pytest.mark.parametrize("family", ["Q4", "Q9", "T3", "T6"])
