@@ -31,12 +31,12 @@ from .damping import damped_step, relaxed
 from .displacement_residual import (DisplacementResidual, ReferenceView, chi_square_change,
                                     displacement_operators, displacement_residual,
                                     reference_view)
-from .driver import MeasurementInputError, ScaleReport, check_inputs, check_scales, judge
+from .driver import (MeasurementInputError, MeasurementSettings, ScaleReport, check_inputs,
+                     check_scales, judge)
 from .image import Image, pyramid
 from .mesh import SurfaceMesh
 from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import pixel_quadrature
-from .residual import NORMALISATIONS
 from .shape import GaussNewtonLog, damped
 from .solvers import DirectSolver, StepSolver
 
@@ -71,12 +71,8 @@ class DisplacementSettings:
     max_shape_fraction: float = 0.25
 
     def __post_init__(self):
-        if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
-            raise ValueError(f"scales must be non-negative integers, got {self.scales!r}")
-        if list(self.scales) != sorted(self.scales, reverse=True):
-            raise ValueError(f"scales must go coarse to fine (decreasing), got {self.scales!r}")
-        if self.normalisation not in NORMALISATIONS:
-            raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {self.normalisation!r}")
+        # the shape's checks of the scales and the normalisation (ValueError naming them)
+        MeasurementSettings(scales=self.scales, normalisation=self.normalisation)
 
 
 @dataclass(frozen=True, eq=False)

@@ -222,33 +222,50 @@ def component_dofs(connectivity: np.ndarray) -> np.ndarray:
     return (3 * conn[:, :, None] + np.arange(3)).reshape(len(conn), -1)
 
 
+#: the 6 distinct products ``G_k G_l`` of a symmetric 3 x 3 block, and where they go
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+_PAIR_OF = np.array([[0, 3, 4], [3, 1, 5], [4, 5, 2]])
+_OPERATOR_BLOCK = 1 << 18   # points per block of elements in the assembly
+
+
 def displacement_operators(quad: PixelQuadrature, res: DisplacementResidual
                            ) -> tuple[sps.csr_matrix, np.ndarray]:
     """Assemble ``H`` (3n, 3n) and ``b`` (3n,) of the displacement's Gauss-Newton step.
 
-    Element by element (points contiguous per element, :class:`ElementGroup`):
-    ``Phi_e[g, 3 i + k] = L_i(xi_g) (dr_c/du_g)_k``, ``H_e = sum_c Phi_e^T W_c Phi_e``,
-    ``b_e = -sum_c Phi_e^T W_c r_c``, scattered on the node-major dofs.
+    With ``phi_g[3 i + k] = L_i(xi_g) (dr_c/du_g)_k`` the element blocks are
+
+        H_e[3 i + k, 3 j + l] = sum_g L_i L_j P_g[k, l],  P_g = sum_c w_g G_cg G_cg^T,
+        b_e[3 i + k]          = -sum_g L_i B_g[k],        B_g = sum_c w_g r_cg G_cg,
+
+    (``G_cg = dr_c/du_g``). The elements of a group share their shape functions ``L`` (m, nn)
+    at the points (:class:`ElementGroup`), so every element's block comes from one matrix
+    product ``(L_i L_j)^T P`` over the ``(nn^2, m) x (m, E * 6)`` of a block of elements (6
+    distinct entries of the symmetric ``P``), then the scatter on the node-major dofs.
     """
     n = 3 * quad.n_nodes
     w = np.where(res.mask, quad.weight_mm2, 0.0)                  # (2, g)
     element_matrices, dofs, b = [], [], np.zeros(n)
     for group in quad.groups:
         E, (m, nn) = len(group.elements), group.N.shape
-        He, be = np.zeros((E, 3 * nn, 3 * nn)), np.zeros((E, 3 * nn))
+        NN = (group.N[:, :, None] * group.N[:, None, :]).reshape(m, nn * nn)   # L_i L_j
+        He, be = np.empty((E, nn, 3, nn, 3)), np.empty((E, nn, 3))
 
         def element_block(span: slice) -> None:
             points = slice(group.start + span.start * m, group.start + span.stop * m)
-            for c in range(2):
-                G = res.dr_du[c, points].reshape(-1, m, 1, 3)
-                phi = (group.N[None, :, :, None] * G).reshape(-1, m, 3 * nn)   # (e, m, 3nn)
-                wphi = phi * w[c, points].reshape(-1, m, 1)
-                He[span] += np.einsum("emi,emj->eij", wphi, phi)     # (batched BLAS is slower)
-                be[span] -= np.einsum("em,emi->ei", res.r[c, points].reshape(-1, m), wphi)
+            G = res.dr_du[:, points]                                        # (2, p, 3)
+            wG = G * w[:, points, None]
+            P = np.stack([np.einsum("cp,cp->p", wG[..., k], G[..., l]) for k, l in _PAIRS], -1)
+            B = np.einsum("cp,cpk->pk", res.r[:, points], wG)               # (p, 3)
+            e = span.stop - span.start
+            P = P.reshape(e, m, 6).transpose(1, 0, 2).reshape(m, e * 6)
+            H6 = (NN.T @ P).reshape(nn, nn, e, 6)                           # one GEMM
+            He[span] = H6[..., _PAIR_OF].transpose(2, 0, 3, 1, 4)           # (e, nn, 3, nn, 3)
+            Bm = B.reshape(e, m, 3).transpose(1, 0, 2).reshape(m, e * 3)
+            be[span] = -(group.N.T @ Bm).reshape(nn, e, 3).transpose(1, 0, 2)
 
-        for_each_block(element_block, E, max(1, _BLOCK // (4 * m)))
+        for_each_block(element_block, E, max(1, _OPERATOR_BLOCK // m))
         conn = component_dofs(group.connectivity)
-        element_matrices.append(He)
+        element_matrices.append(He.reshape(E, 3 * nn, 3 * nn))
         dofs.append(conn)
         b += np.bincount(conn.ravel(), weights=be.ravel(), minlength=n)
     return assemble(dofs, element_matrices, n), b

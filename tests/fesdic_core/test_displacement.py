@@ -213,3 +213,32 @@ def test_a_frame_of_another_size_is_refused(scene):
     small = _images([np.zeros((200, 300)), np.zeros((200, 300))], "small")
     with pytest.raises(ValueError, match="small cam0: image is 300 x 200 px"):
         measure_displacement(reference, small)
+
+
+@pytest.mark.parametrize("family", ["Q4", "Q9", "T6"])
+def test_operators_equal_the_dense_products(scene, family):
+    """H = sum_c Phi_c^T W_c Phi_c and b = -sum_c Phi_c^T W_c r_c with the dense
+    Phi_c[g, 3I + k] = L_I(xi_g) (dr_c/du_g)_k: the blocked assembly to round-off."""
+    cameras, pair = scene
+    mesh = rectangle_mesh(44.0, 30.0, 3, 2, family=family)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    view = reference_view(quad, mesh.nodes, pair(None), cameras, 0)
+    U = 0.01 * np.random.default_rng(0).standard_normal(3 * mesh.n_nodes)
+    res = displacement_residual(U, view, pair(RIGID))
+    H, b = displacement_operators(quad, res)
+    L = quad.L.toarray()
+    w = np.where(res.mask, quad.weight_mm2, 0.0)
+    H_dense, b_dense = np.zeros((3 * mesh.n_nodes,) * 2), np.zeros(3 * mesh.n_nodes)
+    for c in range(2):
+        Phi = (L[:, :, None] * res.dr_du[c][:, None, :]).reshape(len(L), -1)
+        H_dense += Phi.T @ (w[c][:, None] * Phi)
+        b_dense -= Phi.T @ (w[c] * res.r[c])
+    np.testing.assert_allclose(H.toarray(), H_dense, rtol=0, atol=1e-12 * np.abs(H_dense).max())
+    np.testing.assert_allclose(b, b_dense, rtol=0, atol=1e-12 * np.abs(b_dense).max())
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match="coarse to fine"):
+        DisplacementSettings(scales=(0, 1))
+    with pytest.raises(ValueError, match="normalisation"):
+        DisplacementSettings(normalisation="local")
