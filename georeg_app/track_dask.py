@@ -40,6 +40,7 @@ def dask_client(scheduler: str, workers: int | None = None):
     except ImportError:
         raise RuntimeError(f"--scheduler {scheduler}: Dask is not installed (pip install "
                            "\"dask[distributed]\"), use --scheduler serial") from None
+    _quiet_dask_loggers()
     if scheduler.startswith("tcp://"):
         with Client(scheduler) as client:
             yield client
@@ -47,16 +48,26 @@ def dask_client(scheduler: str, workers: int | None = None):
     cores = os.cpu_count() or 1
     if scheduler == "threads":
         cluster = LocalCluster(n_workers=1, threads_per_worker=workers or cores, processes=False,
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.WARNING)
     elif scheduler == "processes":
         n = workers or cores
         threads = str(max(1, cores // n))          # the core's thread pool of each worker
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None, env={"FESDIC_THREADS": threads})
+                               dashboard_address=None, silence_logs=logging.WARNING,
+                               env={"FESDIC_THREADS": threads})
     else:
         raise ValueError(f"unknown scheduler {scheduler!r}")
     with cluster, Client(cluster) as client:
         yield client
+
+
+def _quiet_dask_loggers() -> None:
+    """Dask's own loggers (set to INFO by its configuration when imported) at WARNING unless
+    ours are at DEBUG (--verbose): a cluster's start and stop are not the user's business."""
+    level = logging.DEBUG if logger.isEnabledFor(logging.DEBUG) else logging.WARNING
+    for name in list(logging.root.manager.loggerDict):
+        if name.split(".")[0] in ("distributed", "dask", "tornado", "bokeh"):
+            logging.getLogger(name).setLevel(max(level, logging.getLogger(name).level))
 
 
 def _chained(reference: SeriesReference, index: int, paths: Sequence[Path],
