@@ -213,3 +213,27 @@ def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, 
             ua = _point_data(serial_out / a["mesh_file"])["displacement_mm"]
             ub = _point_data(dask_out / b["mesh_file"])["displacement_mm"]
             np.testing.assert_allclose(ua, ub, rtol=0, atol=1e-12)
+
+
+def test_a_georeg_measure_folder_is_a_reference(series, tmp_path):
+    """`georeg measure` (georeg, 2 levels) on the reference pair, then `georeg track` with
+    [reference] dir = its folder and the georeg displacement on the measured spline."""
+    folder, _ = series
+    shape = tmp_path / "shape"
+    measure = folder / "measure.toml"
+    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
+                       'file = "cameras.json"\n[geometry]\nkind = "rectangle"\nlength_mm = 44.0\n'
+                       'width_mm = 30.0\nelements = 16\n[method]\nname = "georeg"\nlevels = 2\n'
+                       'calibrate = false\nscales = 2\n')
+    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    out = tmp_path / "out"
+    config = _config(folder, series_keys='cam0 = ["frames/f2_cam0.png"]\ncam1 = ["frames/f2_cam1.png"]',
+                     extra=f'[reference]\ndir = "{shape}"', displacement='method = "georeg"\nlevels = 1')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    frame = summary["frames"][0]
+    assert frame["status"] == "ok", frame["failure"]
+    assert str(shape) in summary["reference"]
+    vtu = meshio.read(out / frame["mesh_file"])
+    rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - MOTIONS[1](vtu.points)) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
