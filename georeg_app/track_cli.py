@@ -9,6 +9,7 @@ failed.
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 from pathlib import Path
 from typing import Callable
@@ -21,10 +22,17 @@ SCHEDULERS = ("serial", "threads", "processes")
 
 
 def check_scheduler(scheduler: str) -> str:
-    if scheduler in SCHEDULERS or scheduler.startswith("tcp://"):
-        return scheduler
-    raise ValueError(f"--scheduler {scheduler!r}: expected one of {', '.join(SCHEDULERS)} or "
-                     "tcp://HOST:PORT")
+    """The scheduler, checked before any computing (Dask installed for all but "serial")."""
+    if scheduler not in SCHEDULERS and not scheduler.startswith("tcp://"):
+        raise ValueError(f"--scheduler {scheduler!r}: expected one of {', '.join(SCHEDULERS)} or "
+                         "tcp://HOST:PORT")
+    if scheduler != "serial":
+        try:
+            importlib.import_module("distributed")
+        except ImportError:
+            raise RuntimeError(f"--scheduler {scheduler}: Dask is not installed (pip install "
+                               "\"dask[distributed]\"); use --scheduler serial") from None
+    return scheduler
 
 
 def run_track_command(args: argparse.Namespace, check_output_folder: Callable,

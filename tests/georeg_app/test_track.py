@@ -8,6 +8,7 @@ test measures the reference shape in the run instead.
 """
 import json
 import shutil
+import sys
 import xml.etree.ElementTree as ET
 
 import cv2
@@ -237,3 +238,19 @@ def test_a_georeg_measure_folder_is_a_reference(series, tmp_path):
     vtu = meshio.read(out / frame["mesh_file"])
     rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - MOTIONS[1](vtu.points)) ** 2, axis=0))
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+
+
+def test_a_scheduler_without_dask_or_unknown_is_refused_before_computing(series, tmp_path, capsys,
+                                                                        monkeypatch):
+    folder, _ = series
+    monkeypatch.setitem(sys.modules, "distributed", None)          # as if not installed
+    _fails_with(capsys, ["--scheduler", "processes"], folder, tmp_path, "Dask is not installed")
+    _fails_with(capsys, ["--scheduler", "mpi"], folder, tmp_path, "--scheduler 'mpi'")
+
+
+def _fails_with(capsys, options, folder, tmp_path, text):
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(_config(folder)), "--out", str(out), *options]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("georeg: error: ") and text in err[0], err
+    assert not out.exists()
