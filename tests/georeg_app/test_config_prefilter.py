@@ -96,3 +96,29 @@ def test_edge_margin_default_is_the_core_default(tmp_path):
 def test_core_settings_refuse_a_negative_margin():
     with pytest.raises(ValueError, match="edge_margin_px"):
         MeasurementSettings(edge_margin_px=-1.0)
+
+
+@pytest.mark.parametrize("method", ["fe", "georeg"])
+def test_the_pipeline_measures_with_the_configured_edge_margin(tmp_path, monkeypatch, method):
+    """``[method] edge_margin_px`` reaches the core's settings, for the plain measurement and
+    for the level search alike."""
+    from adapters.fesdic_core import nominal_model
+    from fesdic_core.driver import MeasurementInputError
+    from georeg_app import pipeline
+    from georeg_app.methods import default_specs
+    from georeg_plugin.geometries import rectangle
+
+    seen = []
+
+    def record(*args, **kwargs):
+        seen.append(next(a for a in args if isinstance(a, MeasurementSettings)).edge_margin_px)
+        raise MeasurementInputError("stop here")
+
+    monkeypatch.setattr(pipeline, "measure", record)
+    monkeypatch.setattr(pipeline, "measure_auto_levels", record)
+    config = _load(tmp_path, f'name = "{method}"\nedge_margin_px = 3.5')
+    spec = default_specs(config)[0]
+    with pytest.raises(MeasurementInputError):
+        pipeline._measure_one(spec, nominal_model(rectangle(60.0, 40.0), 2, "Q9"), None, None,
+                              config, None, None)
+    assert seen == [3.5]
