@@ -31,6 +31,7 @@ import secrets
 
 import numpy as np
 
+from .iges import read_iges_surfaces
 from .patch import SplinePatch
 
 logger = logging.getLogger(__name__)
@@ -40,9 +41,6 @@ __all__ = ["write_spline_json", "read_spline_json", "read_scalar_field",
 
 FORMAT = "georeg-spline"
 VERSION = 1
-#: IGES unit flag -> millimetres per unit (IGES 5.3, Global parameter 14)
-_IGES_UNITS_MM = {1: 25.4, 2: 1.0, 4: 304.8, 5: 1609344.0, 6: 1000.0, 7: 1.0e6,
-                  8: 0.0254, 9: 1.0e-3, 10: 10.0, 11: 2.54e-5}
 
 
 def _atomic_write_text(path: pathlib.Path, text: str, newline: str | None = None) -> None:
@@ -254,100 +252,14 @@ def write_iges(path: str | os.PathLike, patch: SplinePatch) -> None:
     logger.info("wrote IGES %s (%d x %d control points)", path, nu, nv)
 
 
-def _split_params(text: str, pdelim: str, rdelim: str) -> list[str]:
-    """Split free-format IGES parameters, honouring Hollerith strings ``nHxxx``."""
-    out, i, n = [], 0, len(text)
-    while i < n:
-        j = i
-        while j < n and text[j] == " ":
-            j += 1
-        k = j
-        while k < n and text[k].isdigit():
-            k += 1
-        if k > j and k < n and text[k] == "H":  # Hollerith string
-            length = int(text[j:k])
-            out.append(text[k + 1:k + 1 + length])
-            i = k + 1 + length
-            while i < n and text[i] not in (pdelim, rdelim):
-                i += 1
-        else:
-            i = j
-            while i < n and text[i] not in (pdelim, rdelim):
-                i += 1
-            out.append(text[j:i].strip())
-        if i >= n or text[i] == rdelim:
-            break
-        i += 1
-    return out
-
-
-def _iges_float(token: str, where: str) -> float:
-    try:
-        return float(token.replace("D", "E").replace("d", "e")) if token else 0.0
-    except ValueError as exc:
-        raise ValueError(f"{where}: {token!r} is not a number") from exc
-
-
 def read_iges(path: str | os.PathLike, entity: int = 0) -> SplinePatch:
-    """Read the ``entity``-th Rational B-Spline Surface (type 128) of an IGES file.
+    """The ``entity``-th untrimmed surface of an IGES file, in mm, transformation applied.
 
-    Coordinates are converted to mm from the file's unit flag and model space scale.
+    A thin wrapper of :func:`georeg_plugin.iges.read_iges_surfaces` (which refuses files
+    with surfaces that need a CAD kernel).
     """
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"IGES file {path} not found")
-    lines = path.read_text(encoding="latin-1").splitlines()
-    by_section: dict[str, list[str]] = {}
-    for number, line in enumerate(lines, start=1):
-        if len(line.rstrip()) == 0:
-            continue
-        if len(line) < 73 or line[72] not in "SGDPTC":
-            raise ValueError(f"{path}: line {number} is not an 80-column IGES record")
-        by_section.setdefault(line[72], []).append(line)
-    if not by_section.get("G") or not by_section.get("D") or not by_section.get("P"):
-        raise ValueError(f"{path}: missing G, D or P section")
-    g_text = "".join(line[:72] for line in by_section["G"])
-    pdelim = g_text[2] if g_text.startswith("1H") else ","
-    rdelim_pos = 4 if g_text.startswith("1H") else 1
-    rdelim = g_text[rdelim_pos + 2] if g_text[rdelim_pos:rdelim_pos + 2] == "1H" else ";"
-    g = _split_params(g_text, pdelim, rdelim)
-    scale = _iges_float(g[12], f"{path}: G field 13 (model space scale)") if len(g) > 12 \
-        else 1.0
-    unit_flag = int(_iges_float(g[13], f"{path}: G field 14 (unit flag)")) if len(g) > 13 \
-        else 2
-    if unit_flag not in _IGES_UNITS_MM:
-        raise ValueError(f"{path}: G field 14 (unit flag) {unit_flag} is not supported")
-    to_mm = _IGES_UNITS_MM[unit_flag] / (scale or 1.0)
-
-    d_lines = by_section["D"]
-    entries = [(d_lines[k], d_lines[k + 1]) for k in range(0, len(d_lines) - 1, 2)]
-    surfaces = [(a, b) for a, b in entries if a[:8].strip() == "128"]
+    surfaces = read_iges_surfaces(path)
     if len(surfaces) <= entity:
-        raise ValueError(f"{path}: has {len(surfaces)} entity 128 (rational B-spline "
-                         f"surface), entity index {entity} requested")
-    first, second = surfaces[entity]
-    if first[48:56].strip() not in ("", "0"):
-        raise ValueError(f"{path}: entity 128 has a transformation matrix "
-                         f"(D field 7 = {first[48:56].strip()}), not supported")
-    pointer, count = int(first[8:16]), int(second[24:32])
-    p_lines = by_section["P"]
-    text = "".join(line[:64] for line in p_lines[pointer - 1:pointer - 1 + count])
-    where = f"{path}: entity 128 parameter data"
-    tokens = _split_params(text, pdelim, rdelim)
-    if int(_iges_float(tokens[0], where)) != 128:
-        raise ValueError(f"{where}: starts with {tokens[0]!r}, not 128")
-    k1, k2, m1, m2 = (int(_iges_float(t, where)) for t in tokens[1:5])
-    nu, nv = k1 + 1, k2 + 1
-    values = np.array([_iges_float(t, where) for t in tokens[10:]])
-    sizes = [nu + m1 + 1, nv + m2 + 1, nu * nv, 3 * nu * nv]
-    if values.size < sum(sizes):
-        raise ValueError(f"{where}: {values.size} numbers, {sum(sizes)} expected for "
-                         f"K1={k1}, K2={k2}, M1={m1}, M2={m2}")
-    ku, kv, w, xyz = np.split(values[:sum(sizes)], np.cumsum(sizes)[:-1])
-    weights = w.reshape(nv, nu).T
-    cp = xyz.reshape(nv, nu, 3).transpose(1, 0, 2) * to_mm
-    polynomial = int(_iges_float(tokens[7], where)) == 1
-    try:
-        return _make_patch((m1, m2), (ku, kv), cp, None if polynomial else weights)
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from exc
+        raise ValueError(f"{path}: has {len(surfaces)} untrimmed surface(s) (entity 128), "
+                         f"entity index {entity} requested")
+    return surfaces[entity].patch
