@@ -240,9 +240,12 @@ def _clamp(knots: np.ndarray, p: int, P: np.ndarray, lo: float, hi: float):
 
     Boehm insertion brings ``lo`` and ``hi`` to multiplicity ``p`` (Eq. 13 leaves the
     curve unchanged), then the functions supported outside ``[lo, hi]`` are dropped.
-    ``P`` (n, ...) holds homogeneous control points along this direction.
+    ``P`` (n, ...) holds homogeneous control points along this direction; the flag
+    says whether knots were inserted or functions dropped.
     """
-    t, P = knots.astype(float), P
+    t = knots.astype(float)
+    if np.all(t[:p + 1] == lo) and np.all(t[-p - 1:] == hi):
+        return t, P, False  # already open on [lo, hi]
     for x in (lo, hi):
         for _ in range(p - int(np.sum(t == x))):
             A, t = _boehm_step(t, p, float(x))
@@ -251,7 +254,7 @@ def _clamp(knots: np.ndarray, p: int, P: np.ndarray, lo: float, hi: float):
     first_hi = int(np.flatnonzero(t == hi)[0]) if p else int(np.searchsorted(t, hi, "left"))
     P = P[last_lo - p:first_hi]
     t = np.concatenate([[lo] * (p + 1), t[last_lo + 1:first_hi], [hi] * (p + 1)])
-    return t, P
+    return t, P, True
 
 
 def _check_not_degenerate(patch: SplinePatch, where: str) -> None:
@@ -288,19 +291,22 @@ def _surface_128(f: _IgesFile, de: int) -> tuple[SplinePatch, str | None]:
     if not np.all(w > 0):
         raise ValueError(f"{where}: weights must be > 0 (PROP3 = {prop[2]}: rational)")
     # homogeneous control points (w x, w), indexed [i, j] with i (u) fastest in the file
-    H = np.concatenate([xyz.reshape(-1, 3) * w[:, None], w[:, None]], axis=1)
-    H = H.reshape(nv, nu, 4).transpose(1, 0, 2)
+    cp = xyz.reshape(nv, nu, 3).transpose(1, 0, 2)
+    w = w.reshape(nv, nu).T
+    H = np.concatenate([cp * w[..., None], w[..., None]], axis=-1)
     for name, (t, p, lo, hi) in (("u", (ku, m1, u0, u1)), ("v", (kv, m2, v0, v1))):
         if not (t[p] - 1e-12 * abs(t[p]) <= lo < hi <= t[-p - 1] + 1e-12 * abs(t[-p - 1])):
             raise ValueError(f"{where}: parameter range [{lo}, {hi}] in {name} is empty "
                              f"or outside the knots' range [{t[p]}, {t[-p - 1]}]")
     try:
-        ku, H = _clamp(ku, m1, H, max(u0, ku[m1]), min(u1, ku[-m1 - 1]))
-        kv, H = _clamp(kv, m2, H.transpose(1, 0, 2), max(v0, kv[m2]), min(v1, kv[-m2 - 1]))
+        ku, H, in_u = _clamp(ku, m1, H, max(u0, ku[m1]), min(u1, ku[-m1 - 1]))
+        kv, H, in_v = _clamp(kv, m2, H.transpose(1, 0, 2), max(v0, kv[m2]),
+                             min(v1, kv[-m2 - 1]))
         H = H.transpose(1, 0, 2)
-        patch = SplinePatch(degrees=(m1, m2), knots=(ku, kv),
-                            control_points=H[..., :3] / H[..., 3:],
-                            weights=None if polynomial else H[..., 3])
+        if in_u or in_v:
+            cp, w = H[..., :3] / H[..., 3:], H[..., 3]  # knots inserted
+        patch = SplinePatch(degrees=(m1, m2), knots=(ku, kv), control_points=cp,
+                            weights=None if polynomial else w)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from exc
     if prop[3] or prop[4]:
@@ -359,8 +365,9 @@ def read_iges_surfaces(path: str | os.PathLike) -> list[IgesSurface]:
             if n1 == 0 and n2 == 0 and base.type == 128:
                 faces.append((de, pts))
             else:
-                why = "trimming loops" if n1 or n2 else f"base entity {base.type}"
-                refused.append(f"entity 144 trimmed surface (directory entry {de}, {why})")
+                why = "trimming loops" if n1 or n2 else "untrimmed"
+                refused.append(f"entity 144 trimmed surface (directory entry {de}, {why} "
+                               f"on entity {base.type})")
         elif e.type == 143:
             wrapped.add(_int(f.params(de)[2], f.where(de)))
             refused.append(f"entity 143 bounded surface (directory entry {de})")
