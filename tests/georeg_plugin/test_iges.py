@@ -244,3 +244,24 @@ def test_bad_files_and_pointers_are_refused_naming_file_and_entity(tmp_path):
     with pytest.raises(ValueError, match="ok.igs: directory entry 1 is entity 124, not "
                        "entity 128"):
         read_iges_surface_entity(path, 1)
+
+
+def test_parameter_range_inside_the_knots_is_clamped_without_moving_the_surface(tmp_path):
+    """U0 U1 V0 V1 narrower than the knots: the patch is the surface on that box (knots
+    inserted to full multiplicity at its ends, Eq. 13), the same points as the original."""
+    path = tmp_path / "box.igs"
+    patch = _wavy()
+    write_iges(path, [patch])
+    text = path.read_text()
+    assert text.count(",0.0,1.0,0.0,1.0;") == 1
+    path.write_text(text.replace(",0.0,1.0,0.0,1.0;", ",0.3,0.9,0.1,0.4;"))
+    surface, = read_iges_surfaces(path)
+    assert_allclose(surface.patch.bounds, [[0.3, 0.1], [0.9, 0.4]], rtol=0, atol=0)
+    assert surface.patch.shape == (5, 3) and surface.patch.is_rational  # spans 2 x 1
+    uv = np.array([0.3, 0.1]) + np.random.default_rng(5).uniform(size=(300, 2)) * [0.6, 0.3]
+    uv = np.vstack([uv, [[0.3, 0.1], [0.9, 0.4], [0.5, 0.4]]])
+    assert_allclose(surface.patch.evaluate(uv), patch.evaluate(uv), rtol=0, atol=1e-12)
+    path.write_text(text.replace(",0.0,1.0,0.0,1.0;", ",0.0,1.5,0.0,1.0;"))
+    with pytest.raises(ValueError, match=r"box.igs: entity 128 \(directory entry 1\): "
+                       r"parameter range \[0.0, 1.5\] in u is empty or outside"):
+        read_iges_surfaces(path)
