@@ -63,6 +63,7 @@ def test_gmsh_bspline_rational_and_bezier_surfaces_read_as_gmsh_evaluates_them(
     assert "skipped 61 entities that are not surfaces (type 116 x60, type 402 x1)" \
         in caplog.text
     assert [s.entity_type for s in surfaces] == [144, 144, 144]
+    assert [s.label for s in surfaces] == [None] * 3  # gmsh writes no names
     assert [s.patch.degrees for s in surfaces] == [(3, 2), (2, 3), (4, 3)]
     assert [s.patch.is_rational for s in surfaces] == [False, True, False]
     gmsh.clear()
