@@ -229,7 +229,8 @@ def test_bad_files_and_pointers_are_refused_naming_file_and_entity(tmp_path):
     text = path.read_text()
     d = [line for line in text.split("\n") if line[72:73] == "D"]
     # the 128 (directory entry 3) points to a transformation at 99, then at itself
-    for target, match in (("      99", r"entity 128 \(directory entry 3\) points to directory entry 99"),
+    for target, match in (("      99", r"entity 128 \(directory entry 3\) points to "
+                                      r"directory entry 99"),
                           ("       3", r"entity 128 \(directory entry 3\): cycle in its "
                                       r"transformations \[3\]")):
         broken = tmp_path / "broken.igs"
