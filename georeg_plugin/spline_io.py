@@ -13,12 +13,14 @@ JSON layout (``format`` "georeg-spline", ``version`` 1)::
      "weights": [[w, ... nv ...], ... nu ...] or null,          # null: B-spline
      "scalar_field": [[f, ... nv ...], ... nu ...]}             # optional, per control point
 
-IGES: one Rational B-Spline Surface entity (type 128, form 0) in the fixed 80-column
-ASCII format of IGES 5.3: Start (S), Global (G), Directory Entry (D, two lines of ten
-8-column fields), Parameter Data (P: data in columns 1-64, the D pointer in 65-72) and
-Terminate (T) sections; column 73 holds the section letter and 74-80 the sequence number.
-Units are mm (unit flag 2), parameter delimiter ``,`` and record delimiter ``;``.
-The IGES first direction (``S``, index ``i`` of ``W(i, j)``, varying fastest) is ``u``.
+IGES: Rational B-Spline Surface entities (type 128, form 0), one per patch, optionally
+named (entity 406 form 15) and placed by a chain of transformation matrices (entity 124),
+in the fixed 80-column ASCII format of IGES 5.3: Start (S), Global (G), Directory Entry
+(D, two lines of ten 8-column fields), Parameter Data (P: data in columns 1-64, the D
+pointer in 65-72) and Terminate (T) sections; column 73 holds the section letter and
+74-80 the sequence number. Units are mm (unit flag 2), parameter delimiter ``,`` and
+record delimiter ``;``. The IGES first direction (``S``, index ``i`` of ``W(i, j)``,
+varying fastest) is ``u``. Reading is :mod:`georeg_plugin.iges`.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ import secrets
 
 import numpy as np
 
+from .iges import read_iges_surfaces
 from .patch import SplinePatch
 
 logger = logging.getLogger(__name__)
@@ -40,9 +43,6 @@ __all__ = ["write_spline_json", "read_spline_json", "read_scalar_field",
 
 FORMAT = "georeg-spline"
 VERSION = 1
-#: IGES unit flag -> millimetres per unit (IGES 5.3, Global parameter 14)
-_IGES_UNITS_MM = {1: 25.4, 2: 1.0, 4: 304.8, 5: 1609344.0, 6: 1000.0, 7: 1.0e6,
-                  8: 0.0254, 9: 1.0e-3, 10: 10.0, 11: 2.54e-5}
 
 
 def _atomic_write_text(path: pathlib.Path, text: str, newline: str | None = None) -> None:
@@ -208,9 +208,9 @@ def _pack(tokens: list[str], width: int) -> list[str]:
     return lines + [line] if line else lines
 
 
-def write_iges(path: str | os.PathLike, patch: SplinePatch) -> None:
-    """Write the patch as an IGES 5.3 file with one entity 128 (mm), atomically."""
-    path = pathlib.Path(path)
+def _entity_128(patch: SplinePatch, name_de: int | None) -> list:
+    """Parameter data of entity 128: K1, K2, M1, M2, PROP1..5, knots S, T, weights,
+    points, U0 U1 V0 V1, then (when named) no associativity and one property pointer."""
     cp = np.asarray(patch.control_points, dtype=float)
     nu, nv = cp.shape[:2]
     p, q = (int(d) for d in patch.degrees)
@@ -218,19 +218,77 @@ def write_iges(path: str | os.PathLike, patch: SplinePatch) -> None:
     w = _weights_or_none(patch)
     polynomial = w is None
     w = np.ones((nu, nv)) if w is None else w
-    # parameter data: K1, K2, M1, M2, PROP1..5, knots S, T, weights, points, U0 U1 V0 V1
-    values = ([128, nu - 1, nv - 1, p, q, 0, 0, int(polynomial), 0, 0]
-              + ku.tolist() + kv.tolist()
-              + w.ravel(order="F").tolist()                      # W(i, j), i fastest
-              + cp.transpose(1, 0, 2).reshape(-1).tolist()       # X, Y, Z (i, j), i fastest
-              + [ku[p], ku[-p - 1], kv[q], kv[-q - 1]])
-    strings = [str(v) if isinstance(v, int) else _iges_real(v) for v in values]
-    p_records = _pack([s + "," for s in strings[:-1]] + [strings[-1] + ";"], 64)
-    de = 1
-    p_lines = [f"{r:<64}{de:>8d}" for r in p_records]
+    return ([128, nu - 1, nv - 1, p, q, 0, 0, int(polynomial), 0, 0]
+            + ku.tolist() + kv.tolist()
+            + w.ravel(order="F").tolist()                      # W(i, j), i fastest
+            + cp.transpose(1, 0, 2).reshape(-1).tolist()       # X, Y, Z (i, j), i fastest
+            + [ku[p], ku[-p - 1], kv[q], kv[-q - 1]]
+            + ([] if name_de is None else [0, 1, name_de]))
+
+
+def _entity_124(M, where: str) -> tuple[list, int]:
+    """Parameter data and form of entity 124 ``[R | T]`` (form 0/1: R orthonormal)."""
+    M = np.asarray(M, dtype=float)
+    if M.shape != (3, 4) or not np.all(np.isfinite(M)):
+        raise ValueError(f"{where}: expected a finite (3, 4) matrix [R | T], "
+                         f"got shape {M.shape}")
+    R = M[:, :3]
+    if not np.allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-12):
+        raise ValueError(f"{where}: R is not orthonormal (IGES entity 124 forms 0 and 1)")
+    return [124] + M.ravel().tolist(), int(np.linalg.det(R) < 0)
+
+
+def write_iges(path: str | os.PathLike, patches, names=None, transforms=None) -> None:
+    """Write patches as an IGES 5.3 file of entities 128 (mm), atomically.
+
+    Parameters
+    ----------
+    path : output file.
+    patches : a SplinePatch, or a sequence of them (one entity 128 each).
+    names : optional, one name per patch (or None): a Name property (entity 406 form 15)
+        and the DE label (8 first characters).
+    transforms : optional, per patch None, a (3, 4) ``[R | T]`` (mm), or a sequence of
+        them applied in turn (a chain of entities 124, each pointing to the next); the
+        control points are written untransformed.
+    """
+    path = pathlib.Path(path)
+    patches = [patches] if isinstance(patches, SplinePatch) else list(patches)
+    names = [None] * len(patches) if names is None else list(names)
+    transforms = [None] * len(patches) if transforms is None else list(transforms)
+    if not patches or len(names) != len(patches) or len(transforms) != len(patches):
+        raise ValueError(f"{path}: {len(patches)} patches, {len(names)} names, "
+                         f"{len(transforms)} transforms: need one each, at least one")
+    entities = []  # (type, form, transform DE, label, values, status)
+    for k, (patch, name, chain) in enumerate(zip(patches, names, transforms)):
+        if chain is not None and np.ndim(chain) == 2:
+            chain = [chain]
+        first = len(entities)
+        for i, M in enumerate(chain or []):
+            values, form = _entity_124(M, f"transforms[{k}][{i}]")
+            nxt = 2 * (len(entities) + 1) + 1 if i + 1 < len(chain) else 0
+            entities.append((124, form, nxt, "", values, "00000000"))
+        t_de = 2 * first + 1 if chain else 0
+        name_de = None
+        if name is not None:
+            name_de = 2 * len(entities) + 1
+            entities.append((406, 15, 0, "", [406, 1, _hollerith(str(name))], "00000100"))
+        entities.append((128, 0, t_de, (name or "SURFACE")[:8],
+                         _entity_128(patch, name_de), "00000000"))
+    d_records, p_lines = [], []
+    for k, (etype, form, t_de, label, values, status) in enumerate(entities):
+        de = 2 * k + 1
+        strings = [v if isinstance(v, str) else str(v) if isinstance(v, int)
+                   else _iges_real(v) for v in values]
+        records = _pack([s + "," for s in strings[:-1]] + [strings[-1] + ";"], 64)
+        d_fields_1 = [etype, len(p_lines) + 1, 0, 0, 0, 0, t_de, 0]
+        d_fields_2 = [etype, 0, 0, len(records), form]
+        d_records += ["".join(f"{v:8d}" for v in d_fields_1) + status,
+                      "".join(f"{v:8d}" for v in d_fields_2) + " " * 16
+                      + f"{label:>8.8}{0:8d}"]
+        p_lines += [f"{r:<64}{de:>8d}" for r in records]
 
     now = datetime.datetime.now().strftime("%Y%m%d.%H%M%S")
-    extent = float(np.max(np.abs(cp))) if cp.size else 0.0
+    extent = max(float(np.max(np.abs(p.control_points))) for p in patches)
     g_tokens = [_hollerith(","), _hollerith(";"), _hollerith("georeg spline"),
                 _hollerith(path.name[:40]), _hollerith("georeg_plugin"),
                 _hollerith("spline_io 1"), "32", "38", "6", "308", "15",
@@ -238,116 +296,25 @@ def write_iges(path: str | os.PathLike, patch: SplinePatch) -> None:
                 _hollerith(now), "1.0E-6", _iges_real(extent), _hollerith("georeg"),
                 _hollerith("georeg"), "11", "0", _hollerith(now)]
     g_records = _pack([t + "," for t in g_tokens[:-1]] + [g_tokens[-1] + ";"], 72)
-    s_records = ["Rational B-spline surface (entity 128) written by georeg_plugin.",
-                 f"Degrees {p}, {q}; {nu} x {nv} control points; units mm."]
-    d_fields_1 = [128, 1, 0, 0, 0, 0, 0, 0]
-    d_fields_2 = [128, 0, 0, len(p_lines), 0]
-    d_records = ["".join(f"{v:8d}" for v in d_fields_1) + "00000000",
-                 "".join(f"{v:8d}" for v in d_fields_2) + " " * 16
-                 + f"{'SURFACE':>8}{0:8d}"]
+    s_records = [f"{len(patches)} rational B-spline surface(s) (entity 128) written by "
+                 "georeg_plugin.", "Units mm."]
     sections = (_section(s_records, "S") + _section(g_records, "G")
                 + _section(d_records, "D") + _section(p_lines, "P"))
     t_record = (f"S{len(s_records):7d}G{len(g_records):7d}"
                 f"D{len(d_records):7d}P{len(p_lines):7d}")
     lines = sections + _section([t_record], "T")
     _atomic_write_text(path, "\n".join(lines) + "\n", newline="\n")
-    logger.info("wrote IGES %s (%d x %d control points)", path, nu, nv)
-
-
-def _split_params(text: str, pdelim: str, rdelim: str) -> list[str]:
-    """Split free-format IGES parameters, honouring Hollerith strings ``nHxxx``."""
-    out, i, n = [], 0, len(text)
-    while i < n:
-        j = i
-        while j < n and text[j] == " ":
-            j += 1
-        k = j
-        while k < n and text[k].isdigit():
-            k += 1
-        if k > j and k < n and text[k] == "H":  # Hollerith string
-            length = int(text[j:k])
-            out.append(text[k + 1:k + 1 + length])
-            i = k + 1 + length
-            while i < n and text[i] not in (pdelim, rdelim):
-                i += 1
-        else:
-            i = j
-            while i < n and text[i] not in (pdelim, rdelim):
-                i += 1
-            out.append(text[j:i].strip())
-        if i >= n or text[i] == rdelim:
-            break
-        i += 1
-    return out
-
-
-def _iges_float(token: str, where: str) -> float:
-    try:
-        return float(token.replace("D", "E").replace("d", "e")) if token else 0.0
-    except ValueError as exc:
-        raise ValueError(f"{where}: {token!r} is not a number") from exc
+    logger.info("wrote IGES %s (%d surface(s))", path, len(patches))
 
 
 def read_iges(path: str | os.PathLike, entity: int = 0) -> SplinePatch:
-    """Read the ``entity``-th Rational B-Spline Surface (type 128) of an IGES file.
+    """The ``entity``-th untrimmed surface of an IGES file, in mm, transformation applied.
 
-    Coordinates are converted to mm from the file's unit flag and model space scale.
+    A thin wrapper of :func:`georeg_plugin.iges.read_iges_surfaces` (which refuses files
+    with surfaces that need a CAD kernel).
     """
-    path = pathlib.Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"IGES file {path} not found")
-    lines = path.read_text(encoding="latin-1").splitlines()
-    by_section: dict[str, list[str]] = {}
-    for number, line in enumerate(lines, start=1):
-        if len(line.rstrip()) == 0:
-            continue
-        if len(line) < 73 or line[72] not in "SGDPTC":
-            raise ValueError(f"{path}: line {number} is not an 80-column IGES record")
-        by_section.setdefault(line[72], []).append(line)
-    if not by_section.get("G") or not by_section.get("D") or not by_section.get("P"):
-        raise ValueError(f"{path}: missing G, D or P section")
-    g_text = "".join(line[:72] for line in by_section["G"])
-    pdelim = g_text[2] if g_text.startswith("1H") else ","
-    rdelim_pos = 4 if g_text.startswith("1H") else 1
-    rdelim = g_text[rdelim_pos + 2] if g_text[rdelim_pos:rdelim_pos + 2] == "1H" else ";"
-    g = _split_params(g_text, pdelim, rdelim)
-    scale = _iges_float(g[12], f"{path}: G field 13 (model space scale)") if len(g) > 12 \
-        else 1.0
-    unit_flag = int(_iges_float(g[13], f"{path}: G field 14 (unit flag)")) if len(g) > 13 \
-        else 2
-    if unit_flag not in _IGES_UNITS_MM:
-        raise ValueError(f"{path}: G field 14 (unit flag) {unit_flag} is not supported")
-    to_mm = _IGES_UNITS_MM[unit_flag] / (scale or 1.0)
-
-    d_lines = by_section["D"]
-    entries = [(d_lines[k], d_lines[k + 1]) for k in range(0, len(d_lines) - 1, 2)]
-    surfaces = [(a, b) for a, b in entries if a[:8].strip() == "128"]
+    surfaces = read_iges_surfaces(path)
     if len(surfaces) <= entity:
-        raise ValueError(f"{path}: has {len(surfaces)} entity 128 (rational B-spline "
-                         f"surface), entity index {entity} requested")
-    first, second = surfaces[entity]
-    if first[48:56].strip() not in ("", "0"):
-        raise ValueError(f"{path}: entity 128 has a transformation matrix "
-                         f"(D field 7 = {first[48:56].strip()}), not supported")
-    pointer, count = int(first[8:16]), int(second[24:32])
-    p_lines = by_section["P"]
-    text = "".join(line[:64] for line in p_lines[pointer - 1:pointer - 1 + count])
-    where = f"{path}: entity 128 parameter data"
-    tokens = _split_params(text, pdelim, rdelim)
-    if int(_iges_float(tokens[0], where)) != 128:
-        raise ValueError(f"{where}: starts with {tokens[0]!r}, not 128")
-    k1, k2, m1, m2 = (int(_iges_float(t, where)) for t in tokens[1:5])
-    nu, nv = k1 + 1, k2 + 1
-    values = np.array([_iges_float(t, where) for t in tokens[10:]])
-    sizes = [nu + m1 + 1, nv + m2 + 1, nu * nv, 3 * nu * nv]
-    if values.size < sum(sizes):
-        raise ValueError(f"{where}: {values.size} numbers, {sum(sizes)} expected for "
-                         f"K1={k1}, K2={k2}, M1={m1}, M2={m2}")
-    ku, kv, w, xyz = np.split(values[:sum(sizes)], np.cumsum(sizes)[:-1])
-    weights = w.reshape(nv, nu).T
-    cp = xyz.reshape(nv, nu, 3).transpose(1, 0, 2) * to_mm
-    polynomial = int(_iges_float(tokens[7], where)) == 1
-    try:
-        return _make_patch((m1, m2), (ku, kv), cp, None if polynomial else weights)
-    except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from exc
+        raise ValueError(f"{path}: has {len(surfaces)} untrimmed surface(s) (entity 128), "
+                         f"entity index {entity} requested")
+    return surfaces[entity].patch
