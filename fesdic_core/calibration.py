@@ -64,6 +64,25 @@ def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | N
     return res.dr_dp
 
 
+_ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (rows, 6) stays
+                     # below the size at which OpenBLAS uses its threads (slow when loaded)
+
+
+def _normal_equations(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None,
+                      w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block."""
+    k = 6 if stereo_jacobian is not None else 12
+    M, rhs = np.zeros((k, k)), np.zeros(k)
+    for start in range(0, len(w), _ROWS):
+        rows = slice(start, start + _ROWS)
+        block = dataclasses.replace(res, dr_dp=res.dr_dp[rows])
+        G = _parameter_gradients(block, stereo_jacobian)
+        wG = w[rows, None] * G
+        M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
+        rhs -= wG.T @ res.r[rows]
+    return M, rhs
+
+
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
@@ -104,10 +123,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             logger.warning("calibration: no integration point is seen by both cameras")
             break
         D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
-        G = _parameter_gradients(res, D)
-        w = np.where(res.mask, quad.weight_mm2, 0.0)
-        M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
-        rhs = -(G.T @ (w * res.r))
+        M, rhs = _normal_equations(res, D, np.where(res.mask, quad.weight_mm2, 0.0))
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
