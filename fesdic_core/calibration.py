@@ -7,6 +7,15 @@ camera 0 only (camera 1 follows). The residual is the same as the shape's (Eq. 3
     dr/dp0 = grad f0^T dx0/dp0,    dr/dp1 = -grad f1^T dx1/dp1,
     M dp = -sum_g w_g G_g r_g,     M = sum_g w_g G_g G_g^T.
 
+When the stereo relation is kept, moving camera 0 by ``dp0`` (camera 1 following) is the
+rigid motion of the specimen ``X' = R0^T (R0(p0 + dp0) X + t0(p0 + dp0) - t0)`` seen by
+fixed cameras, so the rows need no extrinsic derivative of the images: with
+``c = R0 dr/dX`` (the shape's derivative, Eq. 8, in camera 0's frame)
+
+    dr/drvec_i = c . (dR0/drvec_i X),    dr/dt0 = c,
+
+and the residual the calibration ends on carries ``dr/dX`` for the shape step that follows.
+
 Some pose directions are not seen by the gray levels: sliding the specimen in its own
 surface changes neither image. The driver passes them as ``frozen`` directions and the
 step is taken orthogonally to them (in Jacobi-scaled parameters), so they keep their
@@ -26,13 +35,17 @@ from scipy.linalg import null_space
 from .damping import damped_step, relaxed
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
-from .rig import place_camera1, stereo_extrinsic_jacobian
+from .camera import rodrigues
+from .rig import place_camera1
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class CalibrationResult:
+    """End of the calibration: the cameras, the residual at them (with ``dr_dX`` when the
+    stereo relation was kept, for the shape step that follows), iterations, stagnation."""
+
     cameras: tuple
     residual: GrayLevelResidual
     iterations: int
@@ -57,26 +70,39 @@ def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
 
 
 def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None) -> np.ndarray:
-    """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12)."""
+    """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12), from the
+    extrinsic derivative ``res.dr_dp``."""
     g0, g1 = res.dr_dp[:, :6], res.dr_dp[:, 6:]       # grad f0^T dx0/dp0, -grad f1^T dx1/dp1
     if stereo_jacobian is not None:
         return g0 + g1 @ stereo_jacobian                              # camera 1 follows camera 0
     return res.dr_dp
 
 
+def rigid_rig_gradients(dr_dX: np.ndarray, X: np.ndarray, camera0) -> np.ndarray:
+    """Rows ``G_g = dr_g/dp0`` (g, 6) of the stereo-kept calibration from ``dr/dX`` (g, 3):
+    the rig's motion is the specimen's rigid motion (module docstring)."""
+    R0, dR = rodrigues(camera0.rvec)
+    c = np.einsum("ga,ba->gb", dr_dX, R0)                                # R0 dr/dX
+    cX = (c[:, :, None] * X[:, None, :]).reshape(-1, 9)
+    return np.concatenate([np.einsum("gk,ik->gi", cX, dR.reshape(3, 9)), c], axis=1)
+
+
 _ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (rows, 6) stays
                      # below the size at which OpenBLAS uses its threads (slow when loaded)
 
 
-def _normal_equations(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None,
-                      w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
+                      stereo: tuple | None, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block."""
-    k = 6 if stereo_jacobian is not None else 12
+    k = 6 if stereo is not None else 12
     M, rhs = np.zeros((k, k)), np.zeros(k)
-    for start in range(0, len(w), _ROWS):
-        rows = slice(start, start + _ROWS)
-        block = dataclasses.replace(res, dr_dp=res.dr_dp[rows])
-        G = _parameter_gradients(block, stereo_jacobian)
+    seen = np.flatnonzero(w)                                 # unseen points add nothing
+    for start in range(0, len(seen), _ROWS):
+        rows = seen[start:start + _ROWS]
+        if stereo is not None:
+            G = rigid_rig_gradients(res.dr_dX[rows], X[rows], cameras[0])
+        else:
+            G = res.dr_dp[rows]
         wG = w[rows, None] * G
         M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
         rhs -= wG.T @ res.r[rows]
@@ -103,8 +129,10 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         factor ``mu`` (``M + mu diag M``) ten times larger, at most this many times; the
         residual never grows (the divergence guard).
     """
+    jacobian = "extrinsic" if stereo is None else "point"       # see the module docstring
+
     def evaluate(cameras_now) -> GrayLevelResidual:
-        return gray_level_residual(X, quad, images, cameras_now, normalisation, "extrinsic",
+        return gray_level_residual(X, quad, images, cameras_now, normalisation, jacobian,
                                    extra_mask)
 
     def moved(dp: np.ndarray) -> list:
@@ -122,8 +150,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         if not np.isfinite(std):
             logger.warning("calibration: no integration point is seen by both cameras")
             break
-        D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
-        M, rhs = _normal_equations(res, D, np.where(res.mask, quad.weight_mm2, 0.0))
+        M, rhs = _normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)

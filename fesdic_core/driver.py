@@ -336,7 +336,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                                        settings.normalisation, settings.max_iter,
                                        settings.tol_mm * coarse,
                                        residual_rtol=None if finest else settings.fixed_point_rtol,
-                                       log=log, extra_mask=mask, context=context)
+                                       log=log, extra_mask=mask, context=context,
+                                       start=cal.residual if settings.calibrate else None)
             q = shape.q
             total_iterations += shape.iterations
             result = (shape.residual, quad)

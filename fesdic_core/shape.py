@@ -135,7 +135,8 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        residual_rtol: float | None = None,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
-                       on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
+                       on_iteration: Callable[[int, float], None] | None = None,
+                       start: GrayLevelResidual | None = None) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
     Each step solves ``(H + mu diag H) d = b`` through the hook (Levenberg-Marquardt;
@@ -147,14 +148,16 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     damped step lowers the residual any more (:mod:`fesdic_core.damping`).
     ``residual_rtol`` (for the coarse scales of a multiscale run, which only start the next
     scale, Remark 3) also stops it when the residual falls by less than that fraction in a
-    step. ``max_iter`` reached first leaves ``converged=False``.
+    step. ``max_iter`` reached first leaves ``converged=False``. ``start``: the residual at
+    ``q0`` with ``dr_dX`` when the caller has it (same points, images, cameras and
+    normalisation; e.g. the calibration's last one), not evaluated again.
     """
     def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
         return gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
 
     q = np.asarray(q0, float).copy()
-    res = evaluate(q)
+    res = evaluate(q) if start is None or start.dr_dX is None else start
     mu, converged, it, stop = 0.0, False, 0, "iteration limit"
     for it in range(1, max_iter + 1):
         std = res.std_percent
