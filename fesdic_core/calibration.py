@@ -50,6 +50,7 @@ class CalibrationResult:
     residual: GrayLevelResidual
     iterations: int
     converged: bool
+    steps: int = 0                         # accepted steps (0: the poses did not move)
 
 
 def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
@@ -115,7 +116,8 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
                          residual_rtol: float = 1e-4, max_damping: int = 8,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
-                         context: dict | None = None) -> CalibrationResult:
+                         context: dict | None = None,
+                         start: GrayLevelResidual | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
 
     Parameters
@@ -128,6 +130,11 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     max_damping : a step that raises the residual is retried with the Levenberg-Marquardt
         factor ``mu`` (``M + mu diag M``) ten times larger, at most this many times; the
         residual never grows (the divergence guard).
+    start : the residual at ``cameras`` when the caller has it (same points, images, mask
+        and normalisation, with ``dr_dX`` when the stereo relation is kept, else ``dr_dp``).
+
+    A Gauss-Newton step below the stagnation thresholds is not taken (nor its residual
+    evaluated): p has stagnated.
     """
     jacobian = "extrinsic" if stereo is None else "point"       # see the module docstring
 
@@ -143,14 +150,20 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
 
     cams = list(cameras)
     probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # logs each step in px
-    res = evaluate(cams)
-    converged, it, mu = False, 0, 0.0
+    usable = start is not None and (start.dr_dX if stereo is not None else start.dr_dp) is not None
+    res = start if usable else evaluate(cams)
+    converged, it, mu, steps = False, 0, 0.0, 0
     for it in range(1, max_iter + 1):
         std = res.std_percent
         if not np.isfinite(std):
             logger.warning("calibration: no integration point is seen by both cameras")
             break
         M, rhs = _normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
+        plain = truncated_solve(M, rhs, rcond, frozen).reshape(-1, 6)  # the undamped step
+        if np.max(np.abs(plain[:, :3])) < tol_rad and np.max(np.abs(plain[:, 3:])) < tol_mm:
+            converged = True                   # p stagnates: a step this small is not taken
+            logger.debug("calibration it %d: the step is below the stagnation thresholds", it)
+            break
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
@@ -164,7 +177,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             break
         dp, trial_cams, trial = accepted
         before, cams, res = cams, trial_cams, trial
-        mu = relaxed(mu)
+        mu, steps = relaxed(mu), steps + 1
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
         shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
@@ -179,4 +192,4 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             converged = True                   # p stagnates (or, secondary, the residual does)
             break
     return CalibrationResult(cameras=tuple(cams), residual=dataclasses.replace(res, dr_dp=None),
-                             iterations=it, converged=converged)
+                             iterations=it, converged=converged, steps=steps)

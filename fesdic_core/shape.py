@@ -136,7 +136,8 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
                        on_iteration: Callable[[int, float], None] | None = None,
-                       start: GrayLevelResidual | None = None) -> ShapeResult:
+                       start: GrayLevelResidual | None = None,
+                       keep_derivative: bool = False) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
     Each step solves ``(H + mu diag H) d = b`` through the hook (Levenberg-Marquardt;
@@ -151,6 +152,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     step. ``max_iter`` reached first leaves ``converged=False``. ``start``: the residual at
     ``q0`` with ``dr_dX`` when the caller has it (same points, images, cameras and
     normalisation; e.g. the calibration's last one), not evaluated again.
+    ``keep_derivative``: the result's residual keeps its ``dr_dX`` (else dropped).
     """
     def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
@@ -198,5 +200,6 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
             converged, stop = True, "residual"
             break
-    return ShapeResult(q=q, residual=dataclasses.replace(res, dr_dX=None), iterations=it,
+    return ShapeResult(q=q, residual=res if keep_derivative else dataclasses.replace(res, dr_dX=None),
+                       iterations=it,
                        converged=converged, damping=mu, stop=stop)
