@@ -35,6 +35,7 @@ from scipy.linalg import null_space
 from .damping import damped_step, relaxed
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
+from .shape import chi_square
 from .camera import rodrigues
 from .rig import place_camera1
 
@@ -133,7 +134,9 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     start : the residual at ``cameras`` when the caller has it (same points, images, mask
         and normalisation, with ``dr_dX`` when the stereo relation is kept, else ``dr_dp``).
 
-    A Gauss-Newton step below the stagnation thresholds is not taken (nor its residual
+    A Gauss-Newton step below the stagnation thresholds, or whose predicted fall of the cost
+    is below one unit of chi-square (the data cannot tell p from p + dp, as for the shape,
+    :func:`fesdic_core.shape.predicted_chi_square_change`), is not taken (nor its residual
     evaluated): p has stagnated.
     """
     jacobian = "extrinsic" if stereo is None else "point"       # see the module docstring
@@ -159,14 +162,29 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             logger.warning("calibration: no integration point is seen by both cameras")
             break
         M, rhs = _normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
-        plain = truncated_solve(M, rhs, rcond, frozen).reshape(-1, 6)  # the undamped step
-        if np.max(np.abs(plain[:, :3])) < tol_rad and np.max(np.abs(plain[:, 3:])) < tol_mm:
-            converged = True                   # p stagnates: a step this small is not taken
-            logger.debug("calibration it %d: the step is below the stagnation thresholds", it)
+        plain = truncated_solve(M, rhs, rcond, frozen)                # the undamped step
+        c, n = chi_square(res, quad)
+        per_unit = n / c if c > 0.0 else np.inf              # chi-square units per unit of cost
+
+        def fall(dp: np.ndarray) -> float:                   # predicted, as for the shape
+            return abs(2.0 * dp @ rhs - dp @ M @ dp) * per_unit
+        rows = plain.reshape(-1, 6)
+        if (np.max(np.abs(rows[:, :3])) < tol_rad and np.max(np.abs(rows[:, 3:])) < tol_mm
+                or fall(plain) < 1.0):
+            converged = True                   # p stagnates: the step is not taken
+            logger.debug("calibration it %d: the step is stagnant (predicted chi-square fall "
+                         "%.3g)", it, fall(plain))
             break
 
+        within_noise = []
+
         def propose(mu: float):                            # Levenberg-Marquardt guard
+            if within_noise:                 # more damping only shortens a stagnant step
+                return None
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
+            if mu > 0.0 and fall(dp) < 1.0:
+                within_noise.append(mu)      # a refused step damped into the noise: stagnant
+                return None
             trial_cams = moved(dp)
             return dp, trial_cams, evaluate(trial_cams)
 
