@@ -3,14 +3,16 @@
 1. The paper's coarse-to-fine run (section 3.3): image scale ``s`` on spline level
    ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
-2. At the finest image scale, the spline space is enriched while the Bayesian information
-   criterion falls (:mod:`georeg_plugin.selection`): the fall of the gray-level cost to
-   every finer level is predicted from the converged Gauss-Newton system (the search looks
+2. At the finest image scale, the level moves while the Bayesian information criterion
+   falls (:mod:`georeg_plugin.selection`): the gray-level cost at every other level, finer
+   or coarser, is predicted from the converged Gauss-Newton system (the search looks
    ahead: it does not stop on a level that adds too little when a finer one holds a
-   feature); the level of lowest predicted criterion is iterated from the current solution
-   (the levels are nested, Eq. 13: no restart from scratch), its measured criterion
-   decides, and the prediction is renewed from there.
-3. If a finer level was chosen, one more fixed point of calibration and shape at that level
+   feature, and it leaves the start for a coarser level when the start's extra dofs only
+   fit noise, as on a flat plate); the level of lowest predicted criterion is iterated
+   from its predicted optimum (the levels are nested, Eq. 13: no restart from scratch),
+   its measured criterion decides, and the prediction is renewed from there. A level is
+   iterated at most once.
+3. If another level was chosen, one more fixed point of calibration and shape at that level
    (the core's :func:`~fesdic_core.driver.measure`, with its verdict and uncertainty).
 
 The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.uncertainty`:
@@ -30,6 +32,7 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from fesdic_core.driver import Measurement, MeasurementSettings, measure
+from fesdic_core.edges import edge_margin_mask
 from fesdic_core.image import pyramid
 from fesdic_core.shape import shape_gauss_newton
 from fesdic_core.solvers import seen_dofs
@@ -163,6 +166,14 @@ def effective_variance(state, kappa: float, finest_step: np.ndarray | None, fine
     return max(kappa, misfit)
 
 
+def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray,
+             scale: int) -> np.ndarray:
+    """The step from ``q`` to the optimum of ``level`` by the Gauss-Newton model (Eq. 8):
+    ``G_s (b + H q) - q`` with ``G_s = C_s^T (C_s H C_s^T)^-1 C_s`` (Eqs. 18-21). For a level
+    that holds ``q`` (finer, nested: Eq. 13) it is the level's Gauss-Newton step ``G_s b``."""
+    return GeometricRegularization(space, {scale: level}).solve(H, b + H @ q, q, scale) - q
+
+
 def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence,
                         settings: MeasurementSettings, start_levels: int = 3, curved: bool = False,
                         progress: Callable | None = None
@@ -200,31 +211,33 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
     cams = [c.scaled(finest) for c in first.cameras]
     quad, normals = first.quadrature, first.normals
+    mask = None                                   # the core's edge margin at the finest scale
+    if settings.edge_margin_px > 0:
+        mask = edge_margin_mask(quad.points(first.nodes), quad, model.mesh, first.nodes, cams,
+                                settings.edge_margin_px / 2.0 ** finest)
 
     def residual_of(chi: float, state) -> float:                 # std scales like sqrt(c)
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
 
     level, q, state = start, first.q, first.state
-    trials, iterations, current = [], 0, None
+    trials, iterations, current, visited = [], 0, None, {start}
     while True:
-        # the fall of the cost to every finer level, predicted from the current system
-        steps = {finer: GeometricRegularization(space, {finest: finer}).solve(state.H, state.b, q,
-                                                                             finest)
-                 for finer in range(level - 1, -1, -1)}
-        variance = effective_variance(state, kappa, steps.get(0), space.operators[0].shape[0])
+        # the optimum of every level (Eq. 21 at the level), predicted from the current system
+        moves = {other: _move_to(space, other, state.H, state.b, q, finest)
+                 for other in range(n_levels)}
+        variance = effective_variance(state, kappa, moves[0],
+                                      space.operators[0].shape[0])
         if current is None or current.variance != variance:
             current = _trial(level, space, state.chi_square, (), variance,
                              state.residual.std_percent, True, state.n_points)
             trials.append(current)
-        if level == 0:
-            break
         reference = (current.chi_square, current.dofs)
-        predictions = [_trial(finer, space, chi, reference, variance, residual_of(chi, state), False,
-                              state.n_points)
-                       for finer, step in steps.items()
-                       for chi in [predicted_fit(state.chi_square, state.b, step)]]
+        predictions = [_trial(other, space, chi, reference, variance, residual_of(chi, state),
+                              False, state.n_points)
+                       for other, d in moves.items() if other not in visited
+                       for chi in [predicted_fit(state.chi_square, state.b, d, state.H)]]
         trials += predictions
-        better = [t for t in predictions if t.criterion < current.criterion]  # coarse first
+        better = [t for t in predictions if t.criterion < current.criterion]
         logger.info("level search: level %d (%d dofs) BIC %.6g; predicted gains per dof %s "
                     "(threshold ln N = %.3g; noise variance %.3g = %.3g kappa)", level,
                     current.dofs, current.criterion,
@@ -233,13 +246,14 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         if not better:
             break
         best = min(better, key=lambda t: t.criterion)              # the best predicted level
+        visited.add(best.level)
         solver = GeometricRegularization(space, {finest: best.level})
-        shape = shape_gauss_newton(model.mesh.nodes, normals, q, quad, imgs, cams, solver, finest,
-                                   settings.normalisation, settings.max_iter,
-                                   settings.tol_mm * 2.0 ** finest)
+        shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
+                                   cams, solver, finest, settings.normalisation, settings.max_iter,
+                                   settings.tol_mm * 2.0 ** finest, extra_mask=mask)
         iterations += shape.iterations
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
-                                       settings.normalisation)
+                                       settings.normalisation, mask)
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
                           trial_state.residual.std_percent, True, trial_state.n_points)
         trials.append(measured)

@@ -58,7 +58,7 @@ on every family shape and added 100-240 % to the time of 3 fixed levels where it
 the demo-scale and riley tables were measured on that state and are to be re-run.
 
 Run: ``python benchmarks/bench_levels.py [--quick] [--renderer core|riley|both] [--repeat 3]
-[--shapes twisted flat 2 5 10 20] [--supersample 6] [--riley-subsample 4]``
+[--shapes twisted flat 2 5 10 20] [--noise 0 2] [--supersample 6] [--riley-subsample 4]``
 """
 from __future__ import annotations
 
@@ -70,6 +70,7 @@ import platform
 import statistics
 import sys
 import time
+from typing import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -224,8 +225,11 @@ def riley_check() -> float:
 
 
 # ----------------------------------------------------------------------------- cases
-def build_cases(quick: bool, shapes) -> list[tuple[Case, dict]]:
-    """The shapes as (case, render recipe): specimen, cameras, model and settings."""
+def build_cases(quick: bool, shapes, noise: Sequence[float] | None = None) -> list[tuple[Case, dict]]:
+    """The shapes as (case, render recipe): specimen, cameras, model and settings.
+
+    ``noise``: the noise levels (gray levels) each family shape is rendered with (default
+    the family's 2 gray levels); the twisted plate keeps the demo's."""
     cases = []
     if "twisted" in shapes:
         d = scenes.SMALL_DEMO if quick else DEMO
@@ -250,8 +254,10 @@ def build_cases(quick: bool, shapes) -> list[tuple[Case, dict]]:
                                           family)
         name = "flat" if divisor is None else \
             f"sigma W/{divisor} ({scenes.family_sigma(divisor, family):g} mm)"
-        cases.append((Case(name, specimen, cameras, model, MeasurementSettings(scales=(1, 0))),
-                      dict(noise_std=family["noise_std"], seed=family["noise_seed"])))
+        for std in (family["noise_std"],) if noise is None else noise:
+            label = name if noise is None else f"{name}, noise {std:g}"
+            cases.append((Case(label, specimen, cameras, model, MeasurementSettings(scales=(1, 0))),
+                          dict(noise_std=float(std), seed=family["noise_seed"])))
     return cases
 
 
@@ -364,6 +370,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3, help="runs timed for georeg (median)")
     parser.add_argument("--shapes", nargs="+", default=["twisted", "flat", "2", "5", "10", "20"],
                         help="twisted, flat and divisors of the width for the bump's sigma")
+    parser.add_argument("--noise", type=float, nargs="+", default=None,
+                        help="noise levels (gray levels) of the family's shapes (default: 2)")
     parser.add_argument("--supersample", type=int, default=scenes.FAMILY["supersample"],
                         help="rays per pixel side of the core's renderer")
     parser.add_argument("--riley-subsample", type=int, default=4,
@@ -378,7 +386,7 @@ def main() -> None:
         from importlib.metadata import version
         print(f"riley-raster {version('riley-raster')}: flat plate, bilinear, 3 x 3 sub-pixels: "
               f"max |riley - core| = {riley_check():.2g} gray levels")
-    cases = build_cases(args.quick, args.shapes)
+    cases = build_cases(args.quick, args.shapes, args.noise)
     for renderer in renderers:
         rows = []
         for case, recipe in cases:

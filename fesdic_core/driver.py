@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 from .calibration import calibrate_extrinsics
+from .edges import DEFAULT_EDGE_MARGIN_PX, edge_margin_mask
 from .gauge import (pose_directions, rigid_normal_modes, tangential_motions,
                     transfer_rigid_part)
 from .image import Image, pyramid
@@ -68,6 +69,10 @@ class MeasurementSettings:
     uncertainty : at the end, estimate the noise model and the shape's standard deviation
         and bias indicator (:mod:`fesdic_core.uncertainty`); costs about two Gauss-Newton
         iterations at the finest scale.
+    edge_margin_px : leave out the points that project within this many pixels (of the
+        full-resolution images; halved at each coarser scale) of the mesh's boundary in
+        either camera, where the image model mixes the speckle with what lies beyond the
+        edge (:mod:`fesdic_core.edges`); 0 keeps them.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -84,6 +89,7 @@ class MeasurementSettings:
     consistency_factor: float = CONSISTENCY_FACTOR
     max_shape_fraction: float = 0.25
     uncertainty: bool = True
+    edge_margin_px: float = DEFAULT_EDGE_MARGIN_PX
 
     def __post_init__(self):
         if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
@@ -92,6 +98,8 @@ class MeasurementSettings:
             raise ValueError(f"scales must go coarse to fine (decreasing), got {self.scales!r}")
         if self.normalisation not in NORMALISATIONS:
             raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {self.normalisation!r}")
+        if not self.edge_margin_px >= 0:
+            raise ValueError(f"edge_margin_px must be >= 0, got {self.edge_margin_px!r}")
 
 
 @dataclass(frozen=True)
@@ -306,6 +314,10 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         X_now = quad.points(nodes_now)
         mask = None if visibility is None else visibility(X_now, scaled)
+        if settings.edge_margin_px > 0:          # the image model's band across the boundary
+            keep = edge_margin_mask(X_now, quad, mesh, nodes_now, scaled,
+                                    settings.edge_margin_px / 2.0 ** scale)
+            mask = keep if mask is None else mask & keep
         # the first residual of the scale also starts its first calibration (or shape) step
         first = gray_level_residual(X_now, quad, imgs, scaled, settings.normalisation,
                                     "extrinsic" if settings.calibrate and stereo is None

@@ -33,6 +33,7 @@ __all__ = [
     "validate_mesh",
     "rectangle_mesh",
     "edges",
+    "boundary_edges",
     "boundary_nodes",
     "assemble",
 ]
@@ -361,16 +362,24 @@ def edges(mesh: SurfaceMesh) -> tuple[np.ndarray, np.ndarray]:
     return corners, count
 
 
-def boundary_nodes(mesh: SurfaceMesh) -> np.ndarray:
-    """Sorted indices of the nodes on boundary edges (corners and mid-edge nodes)."""
+def boundary_edges(mesh: SurfaceMesh) -> list[np.ndarray]:
+    """The edges of one element only, per block that has some: (k, degree + 1) node indices
+    of each, first corner, second corner, then the mid-edge node (degree 2)."""
     _, inverse, count = np.unique(_edge_keys(mesh), axis=0, return_inverse=True,
                                   return_counts=True)
     on_boundary = count[inverse.ravel()] == 1
     edge_nodes = [block.connectivity[:, block.family.edges].reshape(-1, block.family.degree + 1)
                   for block in mesh.blocks]
     sizes = np.cumsum([len(e) for e in edge_nodes])[:-1]
-    found = [e[flags].ravel() for e, flags in zip(edge_nodes, np.split(on_boundary, sizes))]
-    return np.unique(np.concatenate(found))
+    found = [e[flags] for e, flags in zip(edge_nodes, np.split(on_boundary, sizes))]
+    return [e for e in found if e.size]
+
+
+def boundary_nodes(mesh: SurfaceMesh) -> np.ndarray:
+    """Sorted indices of the nodes on boundary edges (corners and mid-edge nodes)."""
+    found = boundary_edges(mesh)
+    return np.unique(np.concatenate([e.ravel() for e in found])) if found else \
+        np.empty(0, dtype=int)
 
 
 def assemble(connectivities, element_matrices, n_nodes: int) -> sps.csr_matrix:

@@ -50,6 +50,9 @@ A complete example (every key; optional keys show their default in parentheses):
     prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
                                   # cubic B-spline, >= 0, 0 = none (default 0.5, the core's
                                   # fesdic_core.image.DEFAULT_PREFILTER_PX)
+    edge_margin_px = 2.0          # leave out the points within this many px of the mesh's
+                                  # projected boundary, >= 0, 0 = none (default 2, the core's
+                                  # fesdic_core.edges.DEFAULT_EDGE_MARGIN_PX)
 
     [output]                      # optional section
     dir = "georeg_out"            # output folder (default "georeg_out"; `--out` overrides)
@@ -66,6 +69,7 @@ from typing import Any
 
 import numpy as np
 
+from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.image import DEFAULT_PREFILTER_PX
 
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
@@ -156,6 +160,7 @@ class MethodConfig:
     normalisation: str = "element"
     max_fixed_point: int = 10
     prefilter_px: float = DEFAULT_PREFILTER_PX
+    edge_margin_px: float = DEFAULT_EDGE_MARGIN_PX
 
     @property
     def fixed_levels(self) -> int:
@@ -280,7 +285,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
         keep_stereo=t.take("keep_stereo", boolean, "true or false", default=d.keep_stereo),
         normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
         max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point),
-        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px))
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
+        edge_margin_px=t.take("edge_margin_px", number, "a number (px)", default=d.edge_margin_px))
     t.finish()
     check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
     check(t, "levels", m.levels, m.levels == AUTO or m.levels >= 1, '>= 1 or "auto"')
@@ -292,6 +298,7 @@ def _method(data: Any, source: Path) -> MethodConfig:
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
     check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
+    check(t, "edge_margin_px", m.edge_margin_px, m.edge_margin_px >= 0, ">= 0 (px; 0 = no margin)")
     return m
 
 

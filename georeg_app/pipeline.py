@@ -269,7 +269,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
     settings = MeasurementSettings(scales=tuple(spec.scales), calibrate=method.calibrate,
                                    keep_stereo=method.keep_stereo,
                                    normalisation=method.normalisation,
-                                   max_fixed_point=method.max_fixed_point)
+                                   max_fixed_point=method.max_fixed_point,
+                                   edge_margin_px=method.edge_margin_px)
     search = None
     try:
         if spec.name == "georeg" and spec.levels == AUTO:

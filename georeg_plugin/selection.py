@@ -22,9 +22,12 @@ of error. BIC is consistent: it selects the level that holds the shape, not the 
 predicts the pixels best, and a real feature lowers ``c`` by far more than ``ln N`` per dof
 (hundreds to thousands on the bumps of the benchmark).
 
-The fall to each finer level is first predicted from the current Gauss-Newton system
-(``c_s' ~= c - b^T G_s' b``, exact for a linear problem); the level of lowest predicted
-criterion is iterated and its measured criterion decides.
+The cost at every other level, finer or coarser, is first predicted from the current
+Gauss-Newton system (``c_s' ~= c - b^T G_s' b`` for a finer level; for any level, the
+quadratic model at the level's own optimum; exact for a linear problem); the level of
+lowest predicted criterion is iterated and its measured criterion decides. A coarser
+level is taken when the rise of the cost per removed dof is below ``ln N`` kappa: a shape
+that a coarser space holds (a flat plate) is not left with the noise that finer dofs fit.
 """
 from __future__ import annotations
 
@@ -47,7 +50,9 @@ class LevelTrial:
     measured : True when iterated to convergence at this level, False when predicted.
     gain : the statistic: the fall of ``c`` from the level the search stood on, per added
         dof, in units of ``kappa`` (the criterion prefers the finer level when it exceeds
-        ``ln N``; noise alone gives about 1). NaN for the starting level.
+        ``ln N``; noise alone gives about 1); for a coarser level, the rise of ``c`` per
+        removed dof (the coarser level is preferred when it is below ``ln N``). NaN for the
+        starting level.
     chosen : the level the search ended on.
     variance : the noise variance ``kappa`` of ``criterion`` and ``gain``.
     """
@@ -68,16 +73,25 @@ def information_criterion(chi_square: float, dofs: int, variance: float, n_point
     return float(chi_square) + np.log(max(int(n_points), 2)) * float(variance) * int(dofs)
 
 
-def predicted_fit(chi_square: float, b: np.ndarray, step: np.ndarray) -> float:
-    """The cost after the Gauss-Newton step ``step = G b`` (Eq. 8): ``c - b . d``
-    (``c - 2 b.d + d^T H d`` with ``G H G = G``)."""
-    return float(chi_square) - float(np.dot(b, step))
+def predicted_fit(chi_square: float, b: np.ndarray, step: np.ndarray, H=None) -> float:
+    """The cost after a step ``d`` from the current state, by the Gauss-Newton model of Eq. 8.
+
+    ``c - 2 b.d + d^T H d`` for any ``d`` (``H`` given): a move to a coarser level, whose
+    optimum is ``d = G_s (b + H q) - q``; without ``H``, ``d`` must be the Gauss-Newton
+    step ``d = G_s b`` of a finer level, and the cost is ``c - b.d`` (``G H G = G``).
+    """
+    b, step = np.asarray(b, float), np.asarray(step, float)
+    if H is None:
+        return float(chi_square) - float(np.dot(b, step))
+    return float(chi_square) - 2.0 * float(np.dot(b, step)) + float(np.dot(step, H @ step))
 
 
 def noise_gain(chi_square_from: float, dofs_from: int, chi_square_to: float, dofs_to: int,
                variance: float) -> float:
-    """The fall of ``c`` per added dof in units of ``kappa`` (see :class:`LevelTrial`)."""
+    """The fall of ``c`` per added dof in units of ``kappa`` (see :class:`LevelTrial`); to a
+    coarser level, the rise of ``c`` per removed dof (the criterion prefers the coarser level
+    when it is below ``ln N``)."""
     added = int(dofs_to) - int(dofs_from)
-    if added <= 0 or not variance > 0:
+    if added == 0 or not variance > 0:
         return float("nan")
     return (float(chi_square_from) - float(chi_square_to)) / (float(variance) * added)

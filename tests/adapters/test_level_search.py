@@ -4,7 +4,7 @@ import pytest
 import scipy.sparse as sps
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
-from adapters.level_search import ladder
+from adapters.level_search import _move_to, ladder
 from georeg_plugin.geometries import plate_with_hole, rectangle
 from georeg_plugin.selection import information_criterion, noise_gain, predicted_fit
 from georeg_plugin.solver import GeometricRegularization
@@ -56,10 +56,39 @@ def test_predicted_fit_is_exact_for_a_linear_problem():
         assert predicted_fit(c, b, d) == pytest.approx(float(np.sum((r + Phi.T @ d) ** 2)), rel=1e-10)
 
 
+def test_move_to_any_level_is_exact_for_a_linear_problem():
+    """From the optimum of a middle level, the predicted optimum of every level, coarser or
+    finer, is the true least-squares optimum on that level (compared with a dense lstsq), and
+    the predicted cost c - 2 b.d + d^T H d is its true cost."""
+    model = nominal_model(rectangle(30.0, 20.0), (6, 4), "Q9")
+    space = ladder(model)
+    rng = np.random.default_rng(3)
+    n = model.mesh.n_nodes
+    Phi = rng.standard_normal((n, 600))
+    r0 = rng.standard_normal(600)
+    H = sps.csr_matrix(Phi @ Phi.T)
+
+    def cost(q):                                         # c(q) = |r0 + Phi^T q|^2, b = -Phi r
+        return float(np.sum((r0 + Phi.T @ q) ** 2))
+
+    middle = space.n_levels // 2
+    q = _move_to(space, middle, H, -Phi @ r0, np.zeros(n), 0)       # the middle level's optimum
+    r = r0 + Phi.T @ q
+    b, c = -Phi @ r, float(r @ r)
+    for level in range(space.n_levels):
+        d = _move_to(space, level, H, b, q, 0)
+        CT = space.operators[level].T.toarray()
+        a, *_ = np.linalg.lstsq(Phi.T @ CT, -r0, rcond=None)         # min |r0 + Phi^T C^T a|
+        assert np.allclose(q + d, CT @ a, atol=1e-9 * np.abs(CT @ a).max())
+        assert predicted_fit(c, b, d, H) == pytest.approx(cost(q + d), rel=1e-10)
+        assert (cost(q + d) >= c - 1e-9 * c) == (level >= middle)  # nested: coarser fits worse
+
+
 def test_criterion_and_gain():
     assert information_criterion(10.0, 5, 0.5, 1000) == pytest.approx(10.0 + 2.5 * np.log(1000))
     assert noise_gain(10.0, 4, 7.0, 7, 0.5) == pytest.approx(2.0)      # (10 - 7) / (0.5 * 3)
     assert np.isnan(noise_gain(10.0, 4, 7.0, 4, 0.5))
+    assert noise_gain(7.0, 7, 10.0, 4, 0.5) == pytest.approx(2.0)      # coarser: rise per removed dof
 
 
 def test_noise_alone_never_passes_the_criterion():

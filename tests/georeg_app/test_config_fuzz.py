@@ -218,7 +218,8 @@ _GEOMETRY = {"kind": "plate_with_hole", "length_mm": 100.0, "width_mm": 50.0,
              "hole_radius_mm": 14.0, "elements": 300}
 _METHOD = {"name": "georeg", "levels": 3, "start_levels": 3, "scales": 3,
            "tikhonov_length_mm": [5.0, 10.0], "calibrate": True, "keep_stereo": True,
-           "normalisation": "element", "max_fixed_point": 10, "prefilter_px": 0.5}
+           "normalisation": "element", "max_fixed_point": 10, "prefilter_px": 0.5,
+           "edge_margin_px": 2.0}
 _TOP_KEYS = {"images", "cameras", "landmarks", "geometry", "method", "output"}
 _COMMON_VALUES = {
     ("images", "cam0"): "path", ("images", "cam1"): "path",
@@ -227,6 +228,7 @@ _COMMON_VALUES = {
     ("geometry", "elements"): "count",
     ("method", "name"): _enum(METHOD_NAMES), ("method", "levels"): "count_or_auto",
     ("method", "start_levels"): "count", ("method", "prefilter_px"): "non_negative",
+    ("method", "edge_margin_px"): "non_negative",
     ("method", "scales"): "count", ("method", "tikhonov_length_mm"): "positives_or_auto",
     ("method", "calibrate"): "boolean", ("method", "keep_stereo"): "boolean",
     ("method", "normalisation"): _enum(NORMALISATIONS), ("method", "max_fixed_point"): "count",

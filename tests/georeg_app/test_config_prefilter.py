@@ -1,9 +1,12 @@
-"""georeg_app.config: the image model's ``[method] prefilter_px`` (issue 13) and its checks."""
+"""georeg_app.config: the image model's ``[method] prefilter_px`` and ``edge_margin_px`` (issue 13)
+and their checks."""
 import textwrap
 from pathlib import Path
 
 import pytest
 
+from fesdic_core.driver import MeasurementSettings
+from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.image import DEFAULT_PREFILTER_PX
 from georeg_app.config import ConfigError, MethodConfig, load_config
 
@@ -78,3 +81,31 @@ def test_the_pipeline_reads_the_images_with_the_configured_prefilter(tmp_path, m
     with pytest.raises(Stop):
         pipeline.run_methods(config, [])
     assert seen == [("left.tif", 0.7), ("right.tif", 0.7)]
+
+
+def test_edge_margin_default_is_the_core_default(tmp_path):
+    assert _load(tmp_path, "").method.edge_margin_px == DEFAULT_EDGE_MARGIN_PX
+    assert MeasurementSettings().edge_margin_px == DEFAULT_EDGE_MARGIN_PX == MethodConfig().edge_margin_px
+
+
+@pytest.mark.parametrize("text, value", [("edge_margin_px = 3", 3.0), ("edge_margin_px = 0", 0.0)])
+def test_edge_margin_is_read(tmp_path, text, value):
+    m = _load(tmp_path, text).method
+    assert m.edge_margin_px == value and isinstance(m.edge_margin_px, float)
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("edge_margin_px = -1", "[method] edge_margin_px: must be >= 0 (px; 0 = no margin), got -1"),
+    ("edge_margin_px = nan", "[method] edge_margin_px: expected a number (px), got nan"),
+    ('edge_margin_px = "2"', '[method] edge_margin_px: expected a number (px), got "2"'),
+])
+def test_bad_edge_margin_is_refused_naming_the_key(tmp_path, text, expected):
+    with pytest.raises(ConfigError) as info:
+        _load(tmp_path, text)
+    message = str(info.value)
+    assert expected in message and "config.toml" in message and "\n" not in message
+
+
+def test_core_settings_refuse_a_negative_margin():
+    with pytest.raises(ValueError, match="edge_margin_px"):
+        MeasurementSettings(edge_margin_px=-1.0)
