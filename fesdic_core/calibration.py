@@ -14,7 +14,9 @@ fixed cameras, so the rows need no extrinsic derivative of the images: with
 
     dr/drvec_i = c . (dR0/drvec_i X),    dr/dt0 = c,
 
-and the residual the calibration ends on carries ``dr/dX`` for the shape step that follows.
+i.e. ``G = [X x dr/dX, dr/dX] T`` with a constant ``T`` (6, 6) (:func:`_rig_motion`), so
+``M = T^T (sum w u u^T) T`` from the moments ``u = [X x dr/dX, dr/dX]``; and the residual
+the calibration ends on carries ``dr/dX`` for the shape step that follows.
 
 Some pose directions are not seen by the gray levels: sliding the specimen in its own
 surface changes neither image. The driver passes them as ``frozen`` directions and the
@@ -80,13 +82,30 @@ def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | N
     return res.dr_dp
 
 
+def _rig_motion(camera0) -> np.ndarray:
+    """``T`` (6, 6) with ``dr/dp0 = [X x dr/dX, dr/dX] T`` (module docstring).
+
+    Rodrigues' derivative is ``dR0/drvec_i = [v_i]_x R0``, so with ``c = R0 dr/dX``
+    ``c . (dR0/drvec_i X) = v_i . (R0 X x c) = (R0^T v_i) . (X x dr/dX)``.
+    """
+    R0, dR = rodrigues(camera0.rvec)
+    S = dR @ R0.T                                              # [v_i]_x, (3, 3, 3)
+    V = np.stack([S[:, 2, 1], S[:, 0, 2], S[:, 1, 0]], axis=1)  # rows v_i
+    T = np.zeros((6, 6))
+    T[:3, :3] = R0.T @ V.T                                     # columns R0^T v_i
+    T[3:, 3:] = R0.T                                           # c = R0 dr/dX
+    return T
+
+
+def _moments(dr_dX: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``u = [X x dr/dX, dr/dX]`` (g, 6): the residual's derivative along the rigid motions."""
+    return np.concatenate([np.cross(X, dr_dX), dr_dX], axis=1)
+
+
 def rigid_rig_gradients(dr_dX: np.ndarray, X: np.ndarray, camera0) -> np.ndarray:
     """Rows ``G_g = dr_g/dp0`` (g, 6) of the stereo-kept calibration from ``dr/dX`` (g, 3):
     the rig's motion is the specimen's rigid motion (module docstring)."""
-    R0, dR = rodrigues(camera0.rvec)
-    c = np.einsum("ga,ba->gb", dr_dX, R0)                                # R0 dr/dX
-    cX = (c[:, :, None] * X[:, None, :]).reshape(-1, 9)
-    return np.concatenate([np.einsum("gk,ik->gi", cX, dR.reshape(3, 9)), c], axis=1)
+    return _moments(dr_dX, X) @ _rig_motion(camera0)
 
 
 _ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (rows, 6) stays
@@ -95,19 +114,19 @@ _ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (ro
 
 def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
                       stereo: tuple | None, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block."""
+    """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block (with
+    the stereo relation kept, ``G = u T`` and ``M = T^T (sum w u u^T) T``)."""
     k = 6 if stereo is not None else 12
     M, rhs = np.zeros((k, k)), np.zeros(k)
-    seen = np.flatnonzero(w)                                 # unseen points add nothing
-    for start in range(0, len(seen), _ROWS):
-        rows = seen[start:start + _ROWS]
-        if stereo is not None:
-            G = rigid_rig_gradients(res.dr_dX[rows], X[rows], cameras[0])
-        else:
-            G = res.dr_dp[rows]
+    for start in range(0, len(w), _ROWS):
+        rows = slice(start, start + _ROWS)
+        G = _moments(res.dr_dX[rows], X[rows]) if stereo is not None else res.dr_dp[rows]
         wG = w[rows, None] * G
         M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
         rhs -= wG.T @ res.r[rows]
+    if stereo is not None:
+        T = _rig_motion(cameras[0])
+        M, rhs = T.T @ M @ T, T.T @ rhs
     return M, rhs
 
 
