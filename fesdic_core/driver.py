@@ -164,6 +164,11 @@ class Measurement:
         return self.failure is None
 
 
+#: a rigid normal part of q below this (mm) is round-off: left in q, not handed to the poses
+#: (the state, and the residual evaluated there, stay as they are)
+_NO_RIGID_PART_MM = 1e-10
+
+
 class MeasurementInputError(ValueError):
     """Inputs of a measurement that do not fit together (sizes, visibility)."""
 
@@ -373,8 +378,10 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             result = (shape.residual, quad)
             if not settings.calibrate:
                 break
-            q, cams = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
-            final = None                         # the state moved (by the gauge) since
+            q_moved, cams_moved = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
+            if np.max(np.abs(q_moved - q), initial=0.0) > _NO_RIGID_PART_MM:
+                q, cams = q_moved, cams_moved
+                final = None                     # the state moved (by the gauge) since
             scaled = [c.scaled(scale) for c in cams]
             X_nodes = current_nodes(mesh.nodes, normals, q)
             dq = float(np.max(np.abs(q - q_before)))
