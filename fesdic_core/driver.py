@@ -55,7 +55,9 @@ class MeasurementSettings:
         between two fixed-point iterations, in pixels of the current scale. The fixed point
         has also stagnated when two iterations fit the images equally well (chi-square
         changes by less than 1, :func:`~fesdic_core.shape.chi_square_change`): p and q
-        then move within their own noise.
+        then move within their own noise; and when the calibration of a later iteration
+        takes no step (its step is stagnant before it is evaluated), since the shape that
+        ended the previous iteration already sits at its optimum for these poses.
     fixed_point_rtol : at a coarse scale (not the finest), the shape Gauss-Newton and the
         fixed point also hand over to the next scale when the residual falls by less than
         this fraction in an iteration (a coarse scale only starts the next, Remark 3); at
