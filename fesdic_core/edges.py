@@ -35,7 +35,7 @@ __all__ = ["DEFAULT_EDGE_MARGIN_PX", "boundary_samples", "edge_distance_px", "ed
 
 #: points closer than this to the projected mesh boundary (pixels of the full-resolution
 #: images) are left out of the residual: the image model's support (4 x 4 px) and the
-#: 0.5 px prefilter reach about two pixels (measured: benchmarks/bench_image_model.py --edges)
+#: 0.5 px prefilter reach about two pixels (measured: benchmarks/bench_edges.py)
 DEFAULT_EDGE_MARGIN_PX = 2.0
 #: spacing of the boundary samples, in pixels of the camera that sees the edge largest
 _SPACING_PX = 0.5

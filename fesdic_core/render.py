@@ -263,24 +263,132 @@ def intersect_surface(
     return lam
 
 
-def _render_rows(specimen, camera, texture, rows, offsets, background) -> np.ndarray:
-    """Gray levels (len(rows), w) of some image rows: s x s rays per pixel, averaged."""
+# ----------------------------------------------------------------------------- motions
+#: a displacement of the specimen's material points: ``X`` (n, 3) on the undeformed surface
+#: ``z = height(x, y)`` (mm) -> ``u`` (n, 3) mm; the point and its paint move to ``X + u``
+Motion = Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class RigidMotion:
+    """``u(X) = R (X - centre) + centre + translation - X``; ``R`` of the rotation vector
+    ``rvec`` (rad, Rodrigues)."""
+
+    translation_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rvec: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        R = cv2.Rodrigues(np.asarray(self.rvec, float).reshape(3, 1))[0]
+        c = np.asarray(self.centre_mm, float)
+        Y = np.asarray(X, float) - c
+        moved = Y[:, :1] * R[:, 0] + Y[:, 1:2] * R[:, 1] + Y[:, 2:] * R[:, 2]   # R Y, row-wise
+        return moved - Y + np.asarray(self.translation_mm, float)
+
+
+@dataclass(frozen=True)
+class BendingMotion:
+    """Out-of-plane bending ``u = (0, 0, deflection (2 x / span)**2)``: a parabola along x,
+    zero at ``x = 0`` and ``deflection_mm`` at ``x = +-span_mm / 2``."""
+
+    deflection_mm: float
+    span_mm: float
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, float)
+        u = np.zeros_like(X)
+        u[:, 2] = self.deflection_mm * (2.0 * X[:, 0] / self.span_mm) ** 2
+        return u
+
+
+@dataclass(frozen=True)
+class StretchMotion:
+    """Uniform in-plane stretch along x: ``u = (strain (x - centre_x), 0, 0)`` (engineering
+    strain; the Green-Lagrange strain is ``strain + strain**2 / 2``)."""
+
+    strain: float
+    centre_x_mm: float = 0.0
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, float)
+        u = np.zeros_like(X)
+        u[:, 0] = self.strain * (X[:, 0] - self.centre_x_mm)
+        return u
+
+
+def intersect_displaced(specimen: Specimen, motion: Motion, origins: np.ndarray,
+                        directions: np.ndarray, tol_mm: float = 1e-10, max_iter: int = 30,
+                        step_mm: float = 1e-4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Material points ``(x, y)`` whose displaced position lies on the rays, and the ray
+    parameters ``lam``: ``phi(x, y) = origins + lam directions`` with
+    ``phi(x, y) = X + motion(X)``, ``X = (x, y, height(x, y))``.
+
+    Vectorised Newton on the three unknowns ``(x, y, lam)``, started from the undeformed
+    surface (:func:`intersect_surface`); ``dphi/dx`` and ``dphi/dy`` by central
+    differences of ``step_mm`` (they only steer Newton: the converged point satisfies the
+    equation to ``tol_mm``). Rays not converged get NaN.
+    """
+    o = np.broadcast_to(np.asarray(origins, float), np.shape(directions))
+    d = np.asarray(directions, float)
+
+    def phi(x, y):
+        X = np.column_stack([x, y, specimen.height(x, y)])
+        return X + np.asarray(motion(X), float)
+
+    lam = intersect_surface(specimen, o, d)
+    x, y = o[:, 0] + lam * d[:, 0], o[:, 1] + lam * d[:, 1]
+    active = np.isfinite(lam)
+    for _ in range(max_iter):
+        F = phi(x[active], y[active]) - o[active] - lam[active, None] * d[active]
+        if not np.max(np.abs(F), initial=0.0) > tol_mm:
+            break
+        xa, ya = x[active], y[active]
+        a = (phi(xa + step_mm, ya) - phi(xa - step_mm, ya)) / (2.0 * step_mm)      # dphi/dx
+        b = (phi(xa, ya + step_mm) - phi(xa, ya - step_mm)) / (2.0 * step_mm)      # dphi/dy
+        c, r = -d[active], -F                                      # [a b c] delta = r (Cramer)
+        bc = np.cross(b, c)
+        with np.errstate(all="ignore"):
+            det = np.einsum("ij,ij->i", a, bc)
+            x[active] += np.einsum("ij,ij->i", r, bc) / det
+            y[active] += np.einsum("ij,ij->i", a, np.cross(r, c)) / det
+            lam[active] += np.einsum("ij,ij->i", r, np.cross(a, b)) / det
+        active &= np.isfinite(lam)
+    F = phi(x, y) - o - lam[:, None] * d
+    bad = ~(np.max(np.abs(F), axis=1) <= tol_mm)
+    if np.any(bad & np.isfinite(lam)):
+        logger.warning("displaced ray intersection: %d of %d rays did not converge",
+                       int(np.sum(bad & np.isfinite(lam))), lam.size)
+    lam[bad] = np.nan
+    return x, y, lam
+
+
+def _render_rows(specimen, camera, texture, rows, offsets, background, motion=None) -> np.ndarray:
+    """Gray levels (len(rows), w) of some image rows: s x s rays per pixel, averaged.
+
+    With a ``motion``, each ray finds the material point ``(x, y)`` whose displaced
+    position it hits (:func:`intersect_displaced`): the texture moves with the material.
+    """
     w, s = int(camera.image_size[0]), len(offsets)
     v = (rows[:, None] + offsets[None, :])[:, :, None, None]  # (nr, s, 1, 1)
     u = (np.arange(w)[:, None] + offsets[None, :])[None, None, :, :]  # (1, 1, w, s)
     u, v = np.broadcast_arrays(u, v)
     centre, directions = pixel_rays(camera, np.column_stack([u.ravel(), v.ravel()]))
-    lam = intersect_surface(specimen, centre, directions)
-    hit = np.isfinite(lam) & (lam > 0)
-    x = np.where(hit, centre[0] + lam * directions[:, 0], np.inf)
-    y = np.where(hit, centre[1] + lam * directions[:, 1], np.inf)
+    if motion is None:
+        lam = intersect_surface(specimen, centre, directions)
+        hit = np.isfinite(lam) & (lam > 0)
+        x = np.where(hit, centre[0] + lam * directions[:, 0], np.inf)
+        y = np.where(hit, centre[1] + lam * directions[:, 1], np.inf)
+    else:
+        x, y, lam = intersect_displaced(specimen, motion, centre, directions)
+        hit = np.isfinite(lam) & (lam > 0)
+        x, y = np.where(hit, x, np.inf), np.where(hit, y, np.inf)
     material = hit & specimen.contains(x, y)
     gray = np.full(lam.shape, float(background))
     gray[material] = texture(x[material], y[material])
     return gray.reshape(len(rows), s, w, s).mean(axis=(1, 3))  # pixel integration
 
 
-def _render_view(specimen, camera, texture, supersample, background, progress) -> np.ndarray:
+def _render_view(specimen, camera, texture, supersample, background, progress, motion=None) -> np.ndarray:
     """Supersampled gray levels (h, w) of one camera, row chunks cast on a thread pool."""
     w, h = (int(v) for v in camera.image_size)
     s = int(supersample)
@@ -290,7 +398,8 @@ def _render_view(specimen, camera, texture, supersample, background, progress) -
     image = np.empty((h, w))
     name = getattr(camera, "name", "camera")
     with ThreadPoolExecutor(max_workers=min(os.cpu_count() or 1, len(chunks))) as pool:
-        work = pool.map(lambda rows: _render_rows(specimen, camera, texture, rows, offsets, background), chunks)
+        work = pool.map(lambda rows: _render_rows(specimen, camera, texture, rows, offsets, background, motion),
+                        chunks)
         for rows, gray in zip(chunks, tqdm(work, total=len(chunks), desc=f"render {name}", unit="chunk",
                                            disable=not progress)):
             image[rows] = gray
@@ -307,6 +416,7 @@ def render_stereo(
     bit_depth: int | None = 8,
     speckle_mm: float | None = None,
     progress: bool | None = None,
+    motion: "Motion | None" = None,
 ) -> list[np.ndarray]:
     """Render one gray-level image (h, w) float per camera.
 
@@ -317,7 +427,9 @@ def render_stereo(
     gray levels is then added, and the result rounded and clipped to
     ``[0, 2**bit_depth - 1]`` unless ``bit_depth`` is None. ``speckle_mm``
     overrides ``specimen.speckle_mm``; ``progress`` (default: logging at INFO)
-    shows a tqdm bar per camera.
+    shows a tqdm bar per camera. ``motion`` (a :data:`Motion`, e.g.
+    :class:`RigidMotion`) renders the specimen displaced: the material point ``X``
+    of the surface, with its paint, sits at ``X + motion(X)`` (default: not displaced).
     """
     if int(supersample) < 1:
         raise ValueError(f"supersample must be a positive integer, got {supersample!r}")
@@ -333,7 +445,7 @@ def render_stereo(
     rng = np.random.default_rng(seed)
     images = []
     for camera in cameras:
-        image = _render_view(specimen, camera, texture, supersample, background, progress)
+        image = _render_view(specimen, camera, texture, supersample, background, progress, motion)
         if noise_std > 0:
             image += rng.normal(0.0, noise_std, image.shape)
         if bit_depth is not None:

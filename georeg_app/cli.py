@@ -5,6 +5,7 @@
     georeg demo    [--out DIR] [--overwrite]              # embedded synthetic specimen
     georeg measure CONFIG.toml [--out DIR] [--overwrite]  # the method of [method]
     georeg compare CONFIG.toml [--out DIR] [--overwrite]  # FE, Tikhonov, georeg multi/monoscale
+    georeg track   CONFIG.toml [--out DIR] [--overwrite] [--scheduler S]  # displacement series
 
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
 tracebacks on error), ``--version``. An error prints one line ``georeg: error: <message>``
@@ -71,6 +72,18 @@ def build_parser() -> argparse.ArgumentParser:
                        help="output folder (default: [output] dir of the configuration)")
         p.add_argument("--overwrite", action="store_true",
                        help="replace the contents of a non-empty output folder")
+    track = sub.add_parser("track", help="displacement of the measured surface over a series of "
+                                         "stereo pairs ([series], [displacement])")
+    track.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
+    track.add_argument("--out", type=Path, default=None,
+                       help="output folder (default: [output] dir of the configuration)")
+    track.add_argument("--overwrite", action="store_true",
+                       help="replace the contents of a non-empty output folder")
+    track.add_argument("--scheduler", default="serial",
+                       help='"serial" (default, this process), "threads" or "processes" (a local '
+                            'Dask cluster), or tcp://HOST:PORT (an existing Dask scheduler)')
+    track.add_argument("--workers", type=int, default=None,
+                       help="workers of a local Dask cluster (default: Dask's choice)")
     for p in sub.choices.values():
         _common(p, suppress=True)
     return parser
@@ -161,6 +174,9 @@ def check_output_folder(out: Path, overwrite: bool) -> None:
 
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
+    if args.command == "track":
+        from .track_cli import run_track_command
+        return run_track_command(args, check_output_folder, progress_enabled(args.quiet))
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing

@@ -105,13 +105,22 @@ def test_a_solver_that_cannot_lower_the_residual_gives_a_failed_measurement(twis
 
 
 def test_a_good_measurement_is_consistent_with_the_noise(twisted_scene):
-    """At the true cameras the residual sits below the noise floor the images give."""
+    """At the true cameras the residual sits below the noise floor the images give.
+
+    These images carry no noise (8-bit rounding only): the floor is Immerkaer's estimate of
+    the speckle's own fine detail (4.1 gray levels), so the residual has no lower bound
+    from it (0.22 of it with the edge margin, 0.3-0.5 before). Leaving out the band along
+    the plate's edges (the edge margin, :mod:`fesdic_core.edges`) lowers the residual: the
+    band held a misfit that no shape explains."""
     _, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
     m = measure(mesh, images, cameras, None, MeasurementSettings(scales=(1, 0)))
     assert m.ok and m.converged, m.failure
     assert [r.scale for r in m.scales] == [1, 0] and all(r.converged for r in m.scales)
-    assert 0.3 < m.residual_percent / m.noise_percent < 1.5, (m.residual_percent, m.noise_percent)
+    assert m.residual_percent < 1.5 * m.noise_percent, (m.residual_percent, m.noise_percent)
+    whole = measure(mesh, images, cameras, None, MeasurementSettings(scales=(1, 0), edge_margin_px=0.0))
+    assert whole.ok and m.residual_percent < whole.residual_percent, (m.residual_percent,
+                                                                       whole.residual_percent)
 
 
 @pytest.mark.parametrize("case", ["noise", "swapped", "rotated"])

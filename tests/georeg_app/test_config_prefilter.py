@@ -41,10 +41,12 @@ def test_prefilter_default_is_the_core_default(tmp_path):
 
 
 @pytest.mark.parametrize("text, value", [("prefilter_px = 0.7", 0.7), ("prefilter_px = 0", 0.0),
-                                         ("prefilter_px = 1", 1.0)])
-def test_prefilter_is_read(tmp_path, text, value):
+                                         ("prefilter_px = 1", 1.0), ("edge_margin_px = 3", 3.0),
+                                         ("edge_margin_px = 0", 0.0)])
+def test_image_model_settings_are_read(tmp_path, text, value):
+    key = text.split(" =")[0]
     m = _load(tmp_path, text).method
-    assert m.prefilter_px == value and isinstance(m.prefilter_px, float)
+    assert getattr(m, key) == value and isinstance(getattr(m, key), float)
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -54,8 +56,11 @@ def test_prefilter_is_read(tmp_path, text, value):
     ('prefilter_px = "0.7"', '[method] prefilter_px: expected a number (px), got "0.7"'),
     ("prefilter_px = true", "[method] prefilter_px: expected a number (px), got true"),
     ("prefilter = 0.7", "[method] prefilter: unknown key (did you mean prefilter_px?)"),
+    ("edge_margin_px = -1", "[method] edge_margin_px: must be >= 0 (px; 0 = no margin), got -1"),
+    ("edge_margin_px = nan", "[method] edge_margin_px: expected a number (px), got nan"),
+    ('edge_margin_px = "2"', '[method] edge_margin_px: expected a number (px), got "2"'),
 ])
-def test_bad_prefilter_is_refused_naming_the_key(tmp_path, text, expected):
+def test_bad_image_model_settings_are_refused_naming_the_key(tmp_path, text, expected):
     with pytest.raises(ConfigError) as info:
         _load(tmp_path, text)
     message = str(info.value)
@@ -88,24 +93,32 @@ def test_edge_margin_default_is_the_core_default(tmp_path):
     assert MeasurementSettings().edge_margin_px == DEFAULT_EDGE_MARGIN_PX == MethodConfig().edge_margin_px
 
 
-@pytest.mark.parametrize("text, value", [("edge_margin_px = 3", 3.0), ("edge_margin_px = 0", 0.0)])
-def test_edge_margin_is_read(tmp_path, text, value):
-    m = _load(tmp_path, text).method
-    assert m.edge_margin_px == value and isinstance(m.edge_margin_px, float)
-
-
-@pytest.mark.parametrize("text, expected", [
-    ("edge_margin_px = -1", "[method] edge_margin_px: must be >= 0 (px; 0 = no margin), got -1"),
-    ("edge_margin_px = nan", "[method] edge_margin_px: expected a number (px), got nan"),
-    ('edge_margin_px = "2"', '[method] edge_margin_px: expected a number (px), got "2"'),
-])
-def test_bad_edge_margin_is_refused_naming_the_key(tmp_path, text, expected):
-    with pytest.raises(ConfigError) as info:
-        _load(tmp_path, text)
-    message = str(info.value)
-    assert expected in message and "config.toml" in message and "\n" not in message
-
-
 def test_core_settings_refuse_a_negative_margin():
     with pytest.raises(ValueError, match="edge_margin_px"):
         MeasurementSettings(edge_margin_px=-1.0)
+
+
+@pytest.mark.parametrize("method", ["fe", "georeg"])
+def test_the_pipeline_measures_with_the_configured_edge_margin(tmp_path, monkeypatch, method):
+    """``[method] edge_margin_px`` reaches the core's settings, for the plain measurement and
+    for the level search alike."""
+    from adapters.fesdic_core import nominal_model
+    from fesdic_core.driver import MeasurementInputError
+    from georeg_app import pipeline
+    from georeg_app.methods import default_specs
+    from georeg_plugin.geometries import rectangle
+
+    seen = []
+
+    def record(*args, **kwargs):
+        seen.append(next(a for a in args if isinstance(a, MeasurementSettings)).edge_margin_px)
+        raise MeasurementInputError("stop here")
+
+    monkeypatch.setattr(pipeline, "measure", record)
+    monkeypatch.setattr(pipeline, "measure_auto_levels", record)
+    config = _load(tmp_path, f'name = "{method}"\nedge_margin_px = 3.5')
+    spec = default_specs(config)[0]
+    with pytest.raises(MeasurementInputError):
+        pipeline._measure_one(spec, nominal_model(rectangle(60.0, 40.0), 2, "Q9"), None, None,
+                              config, None, None)
+    assert seen == [3.5]

@@ -1,0 +1,256 @@
+"""``georeg track`` on a rendered series with known motion (the core's renderer).
+
+The plate, rig and noise of tests/fesdic_core/test_displacement.py (0.225 mm/px, 4 px
+speckle, 2 gray levels), images written as 8-bit PNG. The reference folder is what
+``georeg measure`` writes (summary.json, <method>.vtu, <method>_cameras.json), made here
+from the true surface and the exact cameras so that the series alone is under test; one
+test measures the reference shape in the run instead.
+"""
+import json
+import shutil
+import sys
+import xml.etree.ElementTree as ET
+
+import cv2
+import meshio
+import numpy as np
+import pytest
+
+from fesdic_core.mesh import rectangle_mesh
+from fesdic_core.mesh_io import write_mesh
+from fesdic_core.render import (RigidMotion, StretchMotion, demo_cameras, flat_plate,
+                                render_stereo, speckle_mm_for)
+from fesdic_core.rig import write_cameras_json
+from georeg_app import cli
+
+#: the series: two translations (the second with a rotation), pure noise, a stretch
+MOTIONS = (RigidMotion((0.1, -0.05, 0.05)), RigidMotion((0.2, -0.1, 0.1), rvec=(0.0, 0.002, 0.0)),
+           None, StretchMotion(0.005))
+MESH = dict(length_mm=44.0, width_mm=30.0, nx=4, ny=3, family="Q4")
+
+
+@pytest.fixture(scope="module")
+def series(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("series")
+    cameras = demo_cameras(image_size=(320, 240), field_mm=72.0)
+    plate = flat_plate(60.0, 40.0, speckle_mm=speckle_mm_for(cameras[0], 4.0), seed=3)
+
+    def save(arrays, stem):
+        for k, a in enumerate(arrays):
+            cv2.imwrite(str(folder / f"{stem}_cam{k}.png"), a.astype(np.uint8))
+
+    save(render_stereo(plate, cameras, noise_std=2.0, seed=1, progress=False), "ref")
+    rng = np.random.default_rng(5)
+    (folder / "frames").mkdir()
+    for i, motion in enumerate(MOTIONS, start=1):
+        arrays = ([rng.uniform(0, 255, (240, 320)) for _ in range(2)] if motion is None else
+                  render_stereo(plate, cameras, noise_std=2.0, seed=10 + i, progress=False,
+                                motion=motion))
+        save(arrays, f"frames/f{i}")
+    ref = folder / "shape_out"
+    ref.mkdir()
+    mesh = rectangle_mesh(MESH["length_mm"], MESH["width_mm"], MESH["nx"], MESH["ny"],
+                          family=MESH["family"])
+    write_mesh(ref / "fe.vtu", mesh)
+    write_cameras_json(ref / "fe_cameras.json", cameras)
+    (ref / "summary.json").write_text(json.dumps(
+        {"methods": [{"label": "FE", "status": "ok", "mesh_file": "fe.vtu"}]}))
+    write_cameras_json(folder / "cameras.json", cameras)
+    return folder, mesh
+
+
+def _config(folder, series_keys='cam0 = "frames/f*_cam0.png"\ncam1 = "frames/f*_cam1.png"',
+            extra='[reference]\ndir = "shape_out"', displacement='method = "fe"\nscales = 3'):
+    path = folder / "track.toml"
+    path.write_text(f'[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n'
+                    f"[series]\n{series_keys}\n[displacement]\n{displacement}\n{extra}\n")
+    return path
+
+
+def _point_data(path):
+    return meshio.read(path).point_data
+
+
+def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, capsys):
+    folder, mesh = series
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(_config(folder)), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    frames = summary["frames"]
+    assert [f["index"] for f in frames] == [1, 2, 3, 4]
+    assert [f["status"] for f in frames] == ["ok", "ok", "failed", "ok"]
+    assert summary["failed_frames"] == [3] and "texture" in frames[2]["failure"]
+    assert not frames[2]["converged"] and all(frames[k]["converged"] for k in (0, 1, 3))
+    assert [f["start_frame"] for f in frames] == [0, 1, 2, 2]       # on from the last good one
+    for key in ("index", "cam0", "cam1", "residual_percent", "iterations", "converged", "time_s",
+                "mesh_file"):
+        assert all(key in f for f in frames)
+    for frame, motion in zip(frames, MOTIONS):
+        if motion is None:
+            assert frame["mesh_file"] == "frame_0003_failed.vtu"
+            continue
+        data = _point_data(out / frame["mesh_file"])
+        rms = np.sqrt(np.mean((data["displacement_mm"] - motion(mesh.nodes)) ** 2, axis=0))
+        assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{frame['mesh_file']}: {1e3 * rms} um"
+        assert {"residual", "strain_xx", "strain_yy", "strain_xy"} <= set(data)
+    stretch = _point_data(out / "frame_0004.vtu")
+    assert abs(np.mean(stretch["strain_xx"]) - (0.005 + 0.5 * 0.005 ** 2)) < 1e-4
+    report = (out / "report.html").read_text()
+    assert "FAILED: " in report and "1 frame(s) FAILED (3)" in report and "data:image/png" in report
+    pvd = ET.parse(out / "displacement.pvd").getroot()
+    assert [d.get("file") for d in pvd.iter("DataSet")] == ["frame_0001.vtu", "frame_0002.vtu",
+                                                           "frame_0004.vtu"]
+
+
+def test_each_frame_from_rest_and_tikhonov_on_each_component(series, tmp_path):
+    folder, mesh = series
+    out = tmp_path / "out"
+    config = _config(folder, series_keys='cam0 = ["frames/f2_cam0.png"]\ncam1 = ["frames/f2_cam1.png"]',
+                     displacement='method = "tikhonov"\ntikhonov_length_mm = 20.0\nincremental = false')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    frame = json.loads((out / "summary.json").read_text())["frames"][0]
+    assert frame["status"] == "ok" and frame["start_frame"] == 0
+    U = _point_data(out / frame["mesh_file"])["displacement_mm"]
+    rms = np.sqrt(np.mean((U - MOTIONS[1](mesh.nodes)) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+
+
+def test_track_measures_the_reference_shape_first(series, tmp_path):
+    """Without [reference]: the shape of the reference pair (FE, exact cameras, no
+    calibration) then the series, with the georeg displacement (the nominal spline)."""
+    folder, mesh = series
+    out = tmp_path / "out"
+    extra = ('[cameras]\nfile = "cameras.json"\n[geometry]\nkind = "rectangle"\nlength_mm = 44.0\n'
+             'width_mm = 30.0\nelements = 16\n[method]\nname = "fe"\ncalibrate = false\nscales = 2')
+    config = _config(folder, series_keys='cam0 = ["frames/f1_cam0.png"]\ncam1 = ["frames/f1_cam1.png"]',
+                     extra=extra, displacement='method = "georeg"\nlevels = 2')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["reference"].startswith("measured here")
+    frame = summary["frames"][0]
+    assert frame["status"] == "ok", frame["failure"]
+    vtu = meshio.read(out / frame["mesh_file"])
+    truth = MOTIONS[0](vtu.points)
+    rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - truth) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+
+
+def _fails_naming(capsys, config, out, *names):
+    code = cli.main(["-q", "track", str(config), "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and err[0].startswith("georeg: error: "), err
+    for name in names:
+        assert name in err[0], err[0]
+    assert not out.exists()
+
+
+def test_frames_of_another_size_are_named(series, tmp_path, capsys):
+    folder, _ = series
+    work = tmp_path / "w"
+    shutil.copytree(folder, work)
+    cv2.imwrite(str(work / "frames" / "f2_cam1.png"), np.zeros((200, 300), np.uint8))
+    _fails_naming(capsys, _config(work), tmp_path / "out", "f2_cam1.png", "300 x 200 px",
+                  "320 x 240 px")
+
+
+def test_counts_that_differ_between_cameras_are_named(series, tmp_path, capsys):
+    folder, _ = series
+    keys = 'cam0 = "frames/f*_cam0.png"\ncam1 = ["frames/f1_cam1.png"]'
+    _fails_naming(capsys, _config(folder, series_keys=keys), tmp_path / "out",
+                  "[series]", "cam0 has 4 frames but cam1 has 1")
+
+
+def test_a_missing_file_in_the_list_is_named(series, tmp_path, capsys):
+    folder, _ = series
+    keys = 'cam0 = ["frames/f1_cam0.png", "frames/f9_cam0.png"]\ncam1 = ["frames/f1_cam1.png", "frames/f2_cam1.png"]'
+    _fails_naming(capsys, _config(folder, series_keys=keys), tmp_path / "out",
+                  "[series] cam0", "f9_cam0.png", "item 2 of 2")
+
+
+@pytest.mark.parametrize("missing", ["fe_cameras.json", "fe.vtu", "summary.json"])
+def test_a_reference_folder_lacking_a_file_is_named(series, tmp_path, capsys, missing):
+    folder, _ = series
+    work = tmp_path / "w"
+    shutil.copytree(folder, work)
+    (work / "shape_out" / missing).unlink()
+    _fails_naming(capsys, _config(work), tmp_path / "out", "[reference] dir", missing)
+
+
+def test_georeg_needs_the_reference_spline(series, tmp_path, capsys):
+    folder, _ = series
+    _fails_naming(capsys, _config(folder, displacement='method = "georeg"'), tmp_path / "out",
+                  "fe_spline.json")
+
+
+def test_every_frame_failing_is_an_error(series, tmp_path, capsys):
+    folder, _ = series
+    keys = 'cam0 = ["frames/f3_cam0.png"]\ncam1 = ["frames/f3_cam1.png"]'
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(_config(folder, series_keys=keys)), "--out", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()      # the frame's warning, then the error
+    assert err[-1].startswith("georeg: error: every frame failed: frame 1: ")
+    assert "no texture" in err[-1] and not out.exists()
+
+
+@pytest.mark.parametrize("incremental", ["true", "false"])
+def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, incremental):
+    """The series through a distributed.LocalCluster of 2 worker processes gives the serial
+    run's fields to round-off (the same frames, statuses and chain)."""
+    pytest.importorskip("distributed")
+    folder, _ = series
+    config = _config(folder, displacement=f'method = "fe"\nscales = 3\nincremental = {incremental}')
+    runs = {}
+    for scheduler in ("serial", "processes"):
+        out = tmp_path / scheduler
+        assert cli.main(["-q", "track", str(config), "--out", str(out), "--scheduler", scheduler,
+                         "--workers", "2"]) == 0
+        runs[scheduler] = (out, json.loads((out / "summary.json").read_text()))
+    (serial_out, serial), (dask_out, dask) = runs["serial"], runs["processes"]
+    assert dask["scheduler"] == "processes"
+    for a, b in zip(serial["frames"], dask["frames"]):
+        assert (a["status"], a["start_frame"], a["mesh_file"], a["iterations"]) == \
+            (b["status"], b["start_frame"], b["mesh_file"], b["iterations"])
+        if a["mesh_file"]:
+            ua = _point_data(serial_out / a["mesh_file"])["displacement_mm"]
+            ub = _point_data(dask_out / b["mesh_file"])["displacement_mm"]
+            np.testing.assert_allclose(ua, ub, rtol=0, atol=1e-12)
+
+
+def test_a_georeg_measure_folder_is_a_reference(series, tmp_path):
+    """`georeg measure` (georeg, 2 levels) on the reference pair, then `georeg track` with
+    [reference] dir = its folder and the georeg displacement on the measured spline."""
+    folder, _ = series
+    shape = tmp_path / "shape"
+    measure = folder / "measure.toml"
+    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
+                       'file = "cameras.json"\n[geometry]\nkind = "rectangle"\nlength_mm = 44.0\n'
+                       'width_mm = 30.0\nelements = 16\n[method]\nname = "georeg"\nlevels = 2\n'
+                       'calibrate = false\nscales = 2\n')
+    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    out = tmp_path / "out"
+    config = _config(folder, series_keys='cam0 = ["frames/f2_cam0.png"]\ncam1 = ["frames/f2_cam1.png"]',
+                     extra=f'[reference]\ndir = "{shape}"', displacement='method = "georeg"\nlevels = 1')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    frame = summary["frames"][0]
+    assert frame["status"] == "ok", frame["failure"]
+    assert str(shape) in summary["reference"]
+    vtu = meshio.read(out / frame["mesh_file"])
+    rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - MOTIONS[1](vtu.points)) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+
+
+def test_a_scheduler_without_dask_or_unknown_is_refused_before_computing(series, tmp_path, capsys,
+                                                                        monkeypatch):
+    folder, _ = series
+    monkeypatch.setitem(sys.modules, "distributed", None)          # as if not installed
+    _fails_with(capsys, ["--scheduler", "processes"], folder, tmp_path, "Dask is not installed")
+    _fails_with(capsys, ["--scheduler", "mpi"], folder, tmp_path, "--scheduler 'mpi'")
+
+
+def _fails_with(capsys, options, folder, tmp_path, text):
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(_config(folder)), "--out", str(out), *options]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("georeg: error: ") and text in err[0], err
+    assert not out.exists()
