@@ -7,6 +7,17 @@ camera 0 only (camera 1 follows). The residual is the same as the shape's (Eq. 3
     dr/dp0 = grad f0^T dx0/dp0,    dr/dp1 = -grad f1^T dx1/dp1,
     M dp = -sum_g w_g G_g r_g,     M = sum_g w_g G_g G_g^T.
 
+When the stereo relation is kept, moving camera 0 by ``dp0`` (camera 1 following) is the
+rigid motion of the specimen ``X' = R0^T (R0(p0 + dp0) X + t0(p0 + dp0) - t0)`` seen by
+fixed cameras, so the rows need no extrinsic derivative of the images: with
+``c = R0 dr/dX`` (the shape's derivative, Eq. 8, in camera 0's frame)
+
+    dr/drvec_i = c . (dR0/drvec_i X),    dr/dt0 = c,
+
+i.e. ``G = [X x dr/dX, dr/dX] T`` with a constant ``T`` (6, 6) (:func:`_rig_motion`), so
+``M = T^T (sum w u u^T) T`` from the moments ``u = [X x dr/dX, dr/dX]``; and the residual
+the calibration ends on carries ``dr/dX`` for the shape step that follows.
+
 Some pose directions are not seen by the gray levels: sliding the specimen in its own
 surface changes neither image. The driver passes them as ``frozen`` directions and the
 step is taken orthogonally to them (in Jacobi-scaled parameters), so they keep their
@@ -26,17 +37,23 @@ from scipy.linalg import null_space
 from .damping import damped_step, relaxed
 from .quadrature import PixelQuadrature
 from .residual import GrayLevelResidual, gray_level_residual
-from .rig import place_camera1, stereo_extrinsic_jacobian
+from .shape import chi_square
+from .camera import rodrigues
+from .rig import place_camera1
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class CalibrationResult:
+    """End of the calibration: the cameras, the residual at them (with ``dr_dX`` when the
+    stereo relation was kept, for the shape step that follows), iterations, stagnation."""
+
     cameras: tuple
     residual: GrayLevelResidual
     iterations: int
     converged: bool
+    steps: int = 0                         # accepted steps (0: the poses did not move)
 
 
 def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
@@ -57,11 +74,60 @@ def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
 
 
 def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None) -> np.ndarray:
-    """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12)."""
+    """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12), from the
+    extrinsic derivative ``res.dr_dp``."""
     g0, g1 = res.dr_dp[:, :6], res.dr_dp[:, 6:]       # grad f0^T dx0/dp0, -grad f1^T dx1/dp1
     if stereo_jacobian is not None:
         return g0 + g1 @ stereo_jacobian                              # camera 1 follows camera 0
     return res.dr_dp
+
+
+def _rig_motion(camera0) -> np.ndarray:
+    """``T`` (6, 6) with ``dr/dp0 = [X x dr/dX, dr/dX] T`` (module docstring).
+
+    Rodrigues' derivative is ``dR0/drvec_i = [v_i]_x R0``, so with ``c = R0 dr/dX``
+    ``c . (dR0/drvec_i X) = v_i . (R0 X x c) = (R0^T v_i) . (X x dr/dX)``.
+    """
+    R0, dR = rodrigues(camera0.rvec)
+    S = dR @ R0.T                                              # [v_i]_x, (3, 3, 3)
+    V = np.stack([S[:, 2, 1], S[:, 0, 2], S[:, 1, 0]], axis=1)  # rows v_i
+    T = np.zeros((6, 6))
+    T[:3, :3] = R0.T @ V.T                                     # columns R0^T v_i
+    T[3:, 3:] = R0.T                                           # c = R0 dr/dX
+    return T
+
+
+def _moments(dr_dX: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """``u = [X x dr/dX, dr/dX]`` (g, 6): the residual's derivative along the rigid motions."""
+    return np.concatenate([np.cross(X, dr_dX), dr_dX], axis=1)
+
+
+def rigid_rig_gradients(dr_dX: np.ndarray, X: np.ndarray, camera0) -> np.ndarray:
+    """Rows ``G_g = dr_g/dp0`` (g, 6) of the stereo-kept calibration from ``dr/dX`` (g, 3):
+    the rig's motion is the specimen's rigid motion (module docstring)."""
+    return _moments(dr_dX, X) @ _rig_motion(camera0)
+
+
+_ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (rows, 6) stays
+                     # below the size at which OpenBLAS uses its threads (slow when loaded)
+
+
+def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
+                      stereo: tuple | None, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block (with
+    the stereo relation kept, ``G = u T`` and ``M = T^T (sum w u u^T) T``)."""
+    k = 6 if stereo is not None else 12
+    M, rhs = np.zeros((k, k)), np.zeros(k)
+    for start in range(0, len(w), _ROWS):
+        rows = slice(start, start + _ROWS)
+        G = _moments(res.dr_dX[rows], X[rows]) if stereo is not None else res.dr_dp[rows]
+        wG = w[rows, None] * G
+        M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
+        rhs -= wG.T @ res.r[rows]
+    if stereo is not None:
+        T = _rig_motion(cameras[0])
+        M, rhs = T.T @ M @ T, T.T @ rhs
+    return M, rhs
 
 
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
@@ -70,7 +136,8 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
                          residual_rtol: float = 1e-4, max_damping: int = 8,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
-                         context: dict | None = None) -> CalibrationResult:
+                         context: dict | None = None,
+                         start: GrayLevelResidual | None = None) -> CalibrationResult:
     """Gauss-Newton on Eq. 6 at fixed surface points ``X`` (g, 3).
 
     Parameters
@@ -83,9 +150,18 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     max_damping : a step that raises the residual is retried with the Levenberg-Marquardt
         factor ``mu`` (``M + mu diag M``) ten times larger, at most this many times; the
         residual never grows (the divergence guard).
+    start : the residual at ``cameras`` when the caller has it (same points, images, mask
+        and normalisation, with ``dr_dX`` when the stereo relation is kept, else ``dr_dp``).
+
+    A Gauss-Newton step below the stagnation thresholds, or whose predicted fall of the cost
+    is below one unit of chi-square (the data cannot tell p from p + dp, as for the shape,
+    :func:`fesdic_core.shape.predicted_chi_square_change`), is not taken (nor its residual
+    evaluated): p has stagnated.
     """
+    jacobian = "extrinsic" if stereo is None else "point"       # see the module docstring
+
     def evaluate(cameras_now) -> GrayLevelResidual:
-        return gray_level_residual(X, quad, images, cameras_now, normalisation, "extrinsic",
+        return gray_level_residual(X, quad, images, cameras_now, normalisation, jacobian,
                                    extra_mask)
 
     def moved(dp: np.ndarray) -> list:
@@ -96,21 +172,38 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
 
     cams = list(cameras)
     probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # logs each step in px
-    res = evaluate(cams)
-    converged, it, mu = False, 0, 0.0
+    usable = start is not None and (start.dr_dX if stereo is not None else start.dr_dp) is not None
+    res = start if usable else evaluate(cams)
+    converged, it, mu, steps = False, 0, 0.0, 0
     for it in range(1, max_iter + 1):
         std = res.std_percent
         if not np.isfinite(std):
             logger.warning("calibration: no integration point is seen by both cameras")
             break
-        D = None if stereo is None else stereo_extrinsic_jacobian(cams[0], *stereo)
-        G = _parameter_gradients(res, D)
-        w = np.where(res.mask, quad.weight_mm2, 0.0)
-        M = G.T @ (w[:, None] * G)                                   # Gauss-Newton matrix of Eq. 6
-        rhs = -(G.T @ (w * res.r))
+        M, rhs = _normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
+        plain = truncated_solve(M, rhs, rcond, frozen)                # the undamped step
+        c, n = chi_square(res, quad)
+        per_unit = n / c if c > 0.0 else np.inf              # chi-square units per unit of cost
+
+        def fall(dp: np.ndarray) -> float:                   # predicted, as for the shape
+            return abs(2.0 * dp @ rhs - dp @ M @ dp) * per_unit
+        rows = plain.reshape(-1, 6)
+        if (np.max(np.abs(rows[:, :3])) < tol_rad and np.max(np.abs(rows[:, 3:])) < tol_mm
+                or fall(plain) < 1.0):
+            converged = True                   # p stagnates: the step is not taken
+            logger.debug("calibration it %d: the step is stagnant (predicted chi-square fall "
+                         "%.3g)", it, fall(plain))
+            break
+
+        within_noise = []
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
+            if within_noise:                 # more damping only shortens a stagnant step
+                return None
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
+            if mu > 0.0 and fall(dp) < 1.0:
+                within_noise.append(mu)      # a refused step damped into the noise: stagnant
+                return None
             trial_cams = moved(dp)
             return dp, trial_cams, evaluate(trial_cams)
 
@@ -121,7 +214,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             break
         dp, trial_cams, trial = accepted
         before, cams, res = cams, trial_cams, trial
-        mu = relaxed(mu)
+        mu, steps = relaxed(mu), steps + 1
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
         shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
@@ -136,4 +229,4 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             converged = True                   # p stagnates (or, secondary, the residual does)
             break
     return CalibrationResult(cameras=tuple(cams), residual=dataclasses.replace(res, dr_dp=None),
-                             iterations=it, converged=converged)
+                             iterations=it, converged=converged, steps=steps)

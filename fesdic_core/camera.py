@@ -262,8 +262,10 @@ class Linearisation:
         """``(dx/dp)^T g`` (n, 6), ``p = [rvec, tvec]``, for pixel-space vectors ``g`` (n, 2)."""
         c = np.column_stack(self._camera_frame(g))
         _, dR = rodrigues(self.camera.rvec)                       # dR[i] = dR / drvec_i
-        dRX = (self.X @ dR.reshape(9, 3).T).reshape(-1, 3, 3)     # [n, i, a] = (dR_i X)_a
-        rot = np.einsum("nia,na->ni", dRX, c)                     # c . (dR_i X)
+        # c . (dR_i X) = sum_ab (c_a X_b) dR_i[a, b]; einsum, not a thin (n, 3) @ (3, 9)
+        # matmul, which a multithreaded BLAS slows down many times inside the core's threads
+        cX = (c[:, :, None] * self.X[:, None, :]).reshape(-1, 9)
+        rot = np.einsum("nk,ik->ni", cX, dR.reshape(3, 9))
         return np.concatenate([rot, c], axis=1)
 
     def dense(self, pull) -> np.ndarray:

@@ -18,6 +18,7 @@ failed and by how much, and :func:`measure` does not call it converged.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -34,7 +35,8 @@ from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import PixelQuadrature, pixel_quadrature
 from .residual import NORMALISATIONS, GrayLevelResidual, gray_level_residual
 from .rig import stereo_transform
-from .shape import GaussNewtonLog, chi_square_change, current_nodes, shape_gauss_newton
+from .shape import (GaussNewtonLog, ShapeResult, chi_square_change, current_nodes,
+                    shape_gauss_newton)
 from .solvers import DirectSolver, StepSolver
 from .uncertainty import LinearisedState, NoiseModel, linearised_state, noise_model, shape_std
 
@@ -53,7 +55,9 @@ class MeasurementSettings:
         between two fixed-point iterations, in pixels of the current scale. The fixed point
         has also stagnated when two iterations fit the images equally well (chi-square
         changes by less than 1, :func:`~fesdic_core.shape.chi_square_change`): p and q
-        then move within their own noise.
+        then move within their own noise; and when the calibration of a later iteration
+        takes no step (its step is stagnant before it is evaluated), since the shape that
+        ended the previous iteration already sits at its optimum for these poses.
     fixed_point_rtol : at a coarse scale (not the finest), the shape Gauss-Newton and the
         fixed point also hand over to the next scale when the residual falls by less than
         this fraction in an iteration (a coarse scale only starts the next, Remark 3); at
@@ -160,6 +164,11 @@ class Measurement:
     def ok(self) -> bool:
         """True when the measurement can be trusted (``failure`` is None)."""
         return self.failure is None
+
+
+#: a rigid normal part of q below this (mm) is round-off: left in q, not handed to the poses
+#: (the state, and the residual evaluated there, stay as they are)
+_NO_RIGID_PART_MM = 1e-10
 
 
 class MeasurementInputError(ValueError):
@@ -302,7 +311,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     t0 = time.perf_counter()
     node_weights = nodal_areas(mesh)          # positive for every family (T6 corners too)
     total_iterations, reports = 0, []
-    result = None
+    result = final = None       # final: the last residual with dr_dX, if at the final state
     for k, scale in enumerate(settings.scales, start=1):
         imgs = [p[scale] for p in pyramids]
         scaled = [c.scaled(scale) for c in cams]
@@ -316,21 +325,24 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             keep = edge_margin_mask(X_now, quad, mesh, nodes_now, scaled,
                                     settings.edge_margin_px / 2.0 ** scale)
             mask = keep if mask is None else mask & keep
-        first = gray_level_residual(X_now, quad, imgs, scaled, settings.normalisation, None, mask)
+        # the first residual of the scale also starts its first calibration (or shape) step
+        first = gray_level_residual(X_now, quad, imgs, scaled, settings.normalisation,
+                                    "extrinsic" if settings.calibrate and stereo is None
+                                    else "point", mask)
         _report_coverage(quad, first, scale)
         if k == 1:
             check_texture(X_now, first.mask, images, cams)
         noise = residual_noise_floor(X_now, first.mask, imgs, scaled)
         if callable(getattr(solver, "start_scale", None)):      # a solver that chooses from data
-            start = linearised_state(mesh.nodes, normals, q, quad, imgs, scaled,
-                                     settings.normalisation, mask)
-            solver.start_scale(scale, noise_model(start, X_now, quad, imgs, scaled, normals,
+            state = linearised_state(mesh.nodes, normals, q, quad, imgs, scaled,
+                                     settings.normalisation, mask, residual=first)
+            solver.start_scale(scale, noise_model(state, X_now, quad, imgs, scaled, normals,
                                                   noise.sigma_gray, scale, settings.normalisation,
                                                   mask))
         coarse = 2.0 ** scale
         finest = scale == settings.scales[-1]
         fixed_point_converged, previous_residual = not settings.calibrate, np.inf
-        previous_fit = None
+        previous_fit, known = None, first   # known: the residual at the current state
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -341,20 +353,37 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                                            normalisation=settings.normalisation,
                                            max_iter=settings.max_iter, extra_mask=mask,
                                            tol_rad=1e-7 * coarse, tol_mm=1e-5 * coarse,
-                                           log=log, context={**context, "scale": scale})
+                                           log=log, context={**context, "scale": scale},
+                                           start=known)
                 cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
                 scaled = [c.scaled(scale) for c in cams]
+                known = cal.residual
+                if fp > 1 and cal.steps == 0 and shape.converged and known.dr_dX is not None:
+                    # the poses did not move: the shape Gauss-Newton that ended the previous
+                    # iteration already stagnated at these cameras (up to the gauge), p and q
+                    # stagnate (section 2.2); the calibration's residual is the final state's
+                    logger.info("scale %d fixed point %d: the poses stagnate at the shape's "
+                                "optimum", scale, fp)
+                    shape = ShapeResult(q=q, residual=known, iterations=0, converged=True,
+                                        stop="fixed point")
+                    result, final = (shape.residual, quad), known
+                    fixed_point_converged = True
+                    break
             shape = shape_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
                                        settings.normalisation, settings.max_iter,
                                        settings.tol_mm * coarse,
                                        residual_rtol=None if finest else settings.fixed_point_rtol,
-                                       log=log, extra_mask=mask, context=context)
-            q = shape.q
+                                       log=log, extra_mask=mask, context=context,
+                                       start=known, keep_derivative=True)
+            q, final, known = shape.q, shape.residual, None
             total_iterations += shape.iterations
             result = (shape.residual, quad)
             if not settings.calibrate:
                 break
-            q, cams = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
+            q_moved, cams_moved = transfer_rigid_part(q, mesh.nodes, normals, node_weights, cams)
+            if np.max(np.abs(q_moved - q), initial=0.0) > _NO_RIGID_PART_MM:
+                q, cams = q_moved, cams_moved
+                final = None                     # the state moved (by the gauge) since
             scaled = [c.scaled(scale) for c in cams]
             X_nodes = current_nodes(mesh.nodes, normals, q)
             dq = float(np.max(np.abs(q - q_before)))
@@ -401,9 +430,10 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     if settings.uncertainty and np.all(np.isfinite(q)):
         extras = _uncertainty(mesh, normals, node_weights, q, quad, imgs,
                               [c.scaled(settings.scales[-1]) for c in cams], solver, settings,
-                              mask, noise.sigma_gray)
+                              mask, noise.sigma_gray, final)
     return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
-                       cameras=tuple(cams), residual=residual, quadrature=quad,
+                       cameras=tuple(cams), residual=dataclasses.replace(residual, dr_dX=None),
+                       quadrature=quad,
                        history=tuple(log.records), iterations=total_iterations,
                        time_s=time.perf_counter() - t0,
                        converged=failure is None and all(r.converged for r in reports),
@@ -413,11 +443,12 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
 
 def _uncertainty(mesh: SurfaceMesh, normals: np.ndarray, node_weights: np.ndarray, q: np.ndarray,
                  quad: PixelQuadrature, images: Sequence[Image], cameras: Sequence, solver,
-                 settings: MeasurementSettings, mask, sigma_gray) -> dict:
-    """The shape's standard deviation and bias indicator at the final state (finest scale)."""
+                 settings: MeasurementSettings, mask, sigma_gray, final=None) -> dict:
+    """The shape's standard deviation and bias indicator at the final state (finest scale);
+    ``final``: the residual (with ``dr_dX``) at that state, if the iterations left it."""
     scale = settings.scales[-1]
     state = linearised_state(mesh.nodes, normals, q, quad, images, cameras,
-                             settings.normalisation, mask)
+                             settings.normalisation, mask, residual=final)
     X = quad.points(current_nodes(mesh.nodes, normals, q))
     noise = noise_model(state, X, quad, images, cameras, normals, sigma_gray, scale,
                         settings.normalisation, mask)

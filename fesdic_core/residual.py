@@ -21,7 +21,10 @@ logger = logging.getLogger(__name__)
 Normalisation = Literal["element", "global", "none"]
 NORMALISATIONS = ("element", "global", "none")
 _SIGMA_FLOOR = 0.005  # fraction of the dynamic range below which an element is "uniform"
-_BLOCK = 1 << 15      # points per block: the temporaries of a block stay in cache
+_BLOCK = 1 << 14      # points per block: the temporaries of a block stay in cache, and the
+                      # thin (block, 3) @ (3, k) products stay below the size at which
+                      # OpenBLAS shares one out over its own threads (oversubscribed inside
+                      # the core's threads: 4x slower on the loaded 2-core benchmark machine)
 
 
 @dataclass(frozen=True, eq=False)

@@ -109,7 +109,9 @@ def damped(H: sps.spmatrix, mu: float) -> sps.spmatrix:
 def chi_square(res: GrayLevelResidual, quad: PixelQuadrature) -> tuple[float, int]:
     """The cost ``c = sum_g w_g r_g**2`` of Eq. 7 and the number of points seen."""
     w = np.where(res.mask, quad.weight_mm2, 0.0)
-    return float(np.dot(w, res.r * res.r)), int(np.count_nonzero(res.mask))
+    # einsum, not np.dot: a BLAS dot of a million points runs on BLAS threads (slower when
+    # the machine is loaded)
+    return float(np.einsum("i,i,i->", w, res.r, res.r)), int(np.count_nonzero(res.mask))
 
 
 def chi_square_change(before: GrayLevelResidual, after: GrayLevelResidual,
@@ -126,6 +128,20 @@ def chi_square_change(before: GrayLevelResidual, after: GrayLevelResidual,
     return (c0 - c1) * n / c0 if c0 > 0.0 and n else float("inf")
 
 
+def predicted_chi_square_change(H, b: np.ndarray, d: np.ndarray, res: GrayLevelResidual,
+                                quad: PixelQuadrature) -> float:
+    """How much the step ``d`` would improve the fit by the linearised model, in units of
+    chi-square (as :func:`chi_square_change`), without evaluating the images there.
+
+    The cost linearised at ``q`` is ``c - 2 d.b + d.H d`` (Eq. 8, ``b = -sum w phi r``), so
+    the predicted fall is ``2 d.b - d.H d`` (``d.b`` for the Gauss-Newton step of any
+    Galerkin projection, e.g. a spline level); divided by ``c / n``.
+    """
+    c, n = chi_square(res, quad)
+    fall = 2.0 * float(d @ b) - float(d @ (H @ d))
+    return fall * n / c if c > 0.0 and n else float("inf")
+
+
 def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                        solver: StepSolver, scale: int = 0, normalisation: str = "element",
@@ -133,26 +149,35 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        residual_rtol: float | None = None,
                        log: GaussNewtonLog | None = None, extra_mask=None,
                        context: dict | None = None,
-                       on_iteration: Callable[[int, float], None] | None = None) -> ShapeResult:
+                       on_iteration: Callable[[int, float], None] | None = None,
+                       start: GrayLevelResidual | None = None,
+                       keep_derivative: bool = False) -> ShapeResult:
     """Solve Eq. 7 at fixed cameras by Gauss-Newton, each step through ``solver``.
 
     Each step solves ``(H + mu diag H) d = b`` through the hook (Levenberg-Marquardt;
     ``mu = 0``, the plain Gauss-Newton step of Eq. 8, whenever that lowers the residual;
     at most ``max_damping`` increases of ``mu``, :mod:`fesdic_core.damping`): the residual
-    never grows. Convergence is the stagnation of q (section 2.2): the accepted
-    step is below ``tol_mm`` (mm, largest node), or it changes the fit by less than one unit
-    of chi-square (:func:`chi_square_change`: the data cannot tell q from q + d), or no
-    damped step lowers the residual any more (:mod:`fesdic_core.damping`).
+    never grows. Convergence is the stagnation of q (section 2.2): the step is below
+    ``tol_mm`` (mm, largest node), or it changes the fit by less than one unit of chi-square
+    (the data cannot tell q from q + d), or no damped step lowers the residual any more
+    (:mod:`fesdic_core.damping`). The plain Gauss-Newton step is first tested before the
+    images are evaluated at its end (its size, and the fall of chi-square the linearised
+    model predicts, :func:`predicted_chi_square_change`): a stagnant step is not taken, and
+    the iteration that would only have confirmed it costs no residual evaluation; an
+    accepted step is tested again with its actual change (:func:`chi_square_change`).
     ``residual_rtol`` (for the coarse scales of a multiscale run, which only start the next
     scale, Remark 3) also stops it when the residual falls by less than that fraction in a
-    step. ``max_iter`` reached first leaves ``converged=False``.
+    step. ``max_iter`` reached first leaves ``converged=False``. ``start``: the residual at
+    ``q0`` with ``dr_dX`` when the caller has it (same points, images, cameras and
+    normalisation; e.g. the calibration's last one), not evaluated again.
+    ``keep_derivative``: the result's residual keeps its ``dr_dX`` (else dropped).
     """
     def evaluate(q: np.ndarray) -> GrayLevelResidual:
         X = quad.points(current_nodes(nodes0, normals, q))
         return gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
 
     q = np.asarray(q0, float).copy()
-    res = evaluate(q)
+    res = evaluate(q) if start is None or start.dr_dX is None else start
     mu, converged, it, stop = 0.0, False, 0, "iteration limit"
     for it in range(1, max_iter + 1):
         std = res.std_percent
@@ -160,10 +185,30 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             logger.warning("shape GN scale %d: no integration point is seen by both cameras", scale)
             break
         H, b = shape_operators(quad, normals, res)
+        plain = solver.solve(H, b, q, scale)                    # the Gauss-Newton step, Eq. 8
+        if np.all(np.isfinite(plain)):
+            step = float(np.max(np.abs(plain))) if plain.size else 0.0
+            stagnant = ("step" if step < tol_mm else "noise"
+                        if abs(predicted_chi_square_change(H, b, plain, res, quad)) < 1.0
+                        else None)
+            if stagnant is not None:                       # q stagnates: the step is not taken
+                converged, stop, it = True, stagnant, it - 1
+                logger.debug("shape GN scale %d: the next step (max|d| %.2e mm) is stagnant (%s)",
+                             scale, step, stagnant)
+                break
+
+        within_noise = []
 
         def propose(mu: float):
-            d = solver.solve(damped(H, mu), b, q, scale)
-            return (d, evaluate(q + d)) if np.all(np.isfinite(d)) else None
+            if within_noise:                 # more damping only shortens a stagnant step
+                return None
+            d = plain if mu == 0.0 else solver.solve(damped(H, mu), b, q, scale)
+            if not np.all(np.isfinite(d)):
+                return None
+            if mu > 0.0 and abs(predicted_chi_square_change(H, b, d, res, quad)) < 1.0:
+                within_noise.append(mu)      # a refused step damped into the noise: stagnant
+                return None
+            return d, evaluate(q + d)
 
         accepted, mu = damped_step(propose, std, mu, max_damping)
         if accepted is None:                # no damped step lowers the residual: q is stagnant
@@ -193,5 +238,6 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
             converged, stop = True, "residual"
             break
-    return ShapeResult(q=q, residual=dataclasses.replace(res, dr_dX=None), iterations=it,
+    return ShapeResult(q=q, residual=res if keep_derivative else dataclasses.replace(res, dr_dX=None),
+                       iterations=it,
                        converged=converged, damping=mu, stop=stop)

@@ -83,10 +83,17 @@ class LinearisedState:
 
 def linearised_state(nodes0: np.ndarray, normals: np.ndarray, q: np.ndarray, quad: PixelQuadrature,
                      images: Sequence, cameras: Sequence, normalisation: str = "element",
-                     mask: np.ndarray | None = None) -> LinearisedState:
-    """Assemble ``H`` and ``b`` (Eq. 8) and the cost (Eq. 7) at the shape ``q``."""
-    X = quad.points(current_nodes(nodes0, normals, q))
-    res = gray_level_residual(X, quad, images, cameras, normalisation, "point", mask)
+                     mask: np.ndarray | None = None,
+                     residual: GrayLevelResidual | None = None) -> LinearisedState:
+    """Assemble ``H`` and ``b`` (Eq. 8) and the cost (Eq. 7) at the shape ``q``.
+
+    ``residual``: the residual at that state with ``dr_dX``, when the caller has it (not
+    evaluated again).
+    """
+    if residual is None or residual.dr_dX is None:
+        X = quad.points(current_nodes(nodes0, normals, q))
+        residual = gray_level_residual(X, quad, images, cameras, normalisation, "point", mask)
+    res = residual
     H, b = shape_operators(quad, normals, res)
     c, n = chi_square(res, quad)
     return LinearisedState(H=H, b=b, residual=res, chi_square=c, n_points=n)

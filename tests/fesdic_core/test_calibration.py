@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from fesdic_core.accuracy import stereo_correspondence_error
-from fesdic_core.calibration import _parameter_gradients, calibrate_extrinsics, truncated_solve
+from fesdic_core.calibration import (_parameter_gradients, calibrate_extrinsics,
+                                     rigid_rig_gradients, truncated_solve)
 from fesdic_core.gauge import move_cameras_with_specimen, pose_directions, tangential_motions
 from fesdic_core.image import pyramid
 from fesdic_core.mesh import node_normals, rectangle_mesh
@@ -77,6 +78,22 @@ def test_calibration_step_never_moves_the_frozen_slides(problem):
     assert np.linalg.norm(dp) > 1e-3                        # a real step...
     np.testing.assert_allclose(frozen.T @ metric, 0.0,      # ...with no component on the slides
                                atol=1e-9 * np.linalg.norm(frozen, axis=0).max() * np.linalg.norm(metric))
+
+
+def test_rigid_rig_gradients_equal_the_extrinsic_derivative(problem):
+    """With the stereo relation kept, dr/dp0 from dr/dX (the rig's motion is the specimen's
+    rigid motion) equals the extrinsic derivative through both cameras (camera 1 following)."""
+    quad, start = problem["quads"][1], problem["start"]
+    scaled = [c.scaled(1) for c in start]
+    X = quad.points(problem["nodes"])
+    both = [gray_level_residual(X, quad, problem["images"][1], scaled, jacobian=j)
+            for j in ("extrinsic", "point")]
+    want = _parameter_gradients(both[0], stereo_extrinsic_jacobian(scaled[0], *problem["stereo"]))
+    got = rigid_rig_gradients(both[1].dr_dX, X, scaled[0])
+    seen = both[0].mask
+    assert seen.sum() > 1000
+    scale = np.abs(want[seen]).max(axis=0)                  # per parameter (rad vs mm)
+    np.testing.assert_allclose(got[seen] / scale, want[seen] / scale, rtol=0, atol=1e-7)
 
 
 def test_truncated_solve_is_orthogonal_to_the_frozen_directions():

@@ -5,7 +5,8 @@ from fesdic_core.mesh import node_normals, rectangle_mesh
 from fesdic_core.quadrature import pixel_quadrature
 from fesdic_core.render import true_normal_offset
 from fesdic_core.residual import gray_level_residual
-from fesdic_core.shape import GaussNewtonLog, current_nodes, shape_gauss_newton, shape_operators
+from fesdic_core.shape import (GaussNewtonLog, chi_square_change, current_nodes,
+                               predicted_chi_square_change, shape_gauss_newton, shape_operators)
 from fesdic_core.solvers import DirectSolver, StepSolver
 
 
@@ -103,3 +104,44 @@ def test_an_overshooting_step_is_damped_until_the_residual_falls(twisted_scene):
     assert max(r["damping"] for r in log.records) > 0.0
     truth = true_normal_offset(specimen, mesh.nodes, normals)
     assert result.converged and np.sqrt(np.mean((result.q - truth) ** 2)) < 0.02, result.q
+
+
+def test_predicted_chi_square_change_matches_the_actual_change(twisted_scene):
+    """For a small Gauss-Newton step (normalisation "none": the linearisation is exact to
+    first order) the predicted fall of the cost is the actual one, to second order."""
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    truth = true_normal_offset(twisted_scene[0], mesh.nodes, normals)
+    q = truth + 0.002                               # 2 um off the truth: the linear regime
+    X = quad.points(current_nodes(mesh.nodes, normals, q))
+    res = gray_level_residual(X, quad, images, cameras, "none", "point")
+    H, b = shape_operators(quad, normals, res)
+    d = DirectSolver().solve(H, b, q, 0)
+    predicted = predicted_chi_square_change(H, b, d, res, quad)
+    X1 = quad.points(current_nodes(mesh.nodes, normals, q + d))
+    after = gray_level_residual(X1, quad, images, cameras, "none", None)
+    actual = chi_square_change(res, after, quad)
+    assert predicted > 10.0, predicted              # a step the data do see...
+    assert abs(predicted - actual) < 0.1 * actual, (predicted, actual)  # without evaluating it
+
+
+def test_a_stagnant_step_is_neither_taken_nor_evaluated(twisted_scene):
+    """Restarted at its own optimum, the Gauss-Newton takes no step: the plain step is
+    stagnant (below tol_mm or within one unit of chi-square) and the images are evaluated
+    only once (for the start)."""
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
+    normals = node_normals(mesh)
+    quad = pixel_quadrature(mesh, cameras, points_per_px=0.5)
+    first = shape_gauss_newton(mesh.nodes, normals, np.zeros(mesh.n_nodes), quad, images, cameras,
+                               DirectSolver(), keep_derivative=True)
+    assert first.converged and first.iterations > 1 and first.residual.dr_dX is not None
+    log = GaussNewtonLog()
+    again = shape_gauss_newton(mesh.nodes, normals, first.q, quad, images, cameras, DirectSolver(),
+                               log=log, start=first.residual)
+    assert again.converged and again.stop in ("step", "noise") and again.iterations == 0
+    assert log.records == []                        # no step taken
+    np.testing.assert_array_equal(again.q, first.q)
+    assert again.residual.std_percent == first.residual.std_percent   # the start's, not re-evaluated
