@@ -12,8 +12,10 @@
    from its predicted optimum (the levels are nested, Eq. 13: no restart from scratch),
    its measured criterion decides, and the prediction is renewed from there. A level is
    iterated at most once.
-3. If another level was chosen, one more fixed point of calibration and shape at that level
-   (the core's :func:`~fesdic_core.driver.measure`, with its verdict and uncertainty).
+3. If another level was chosen: with calibration, one more fixed point of calibration and
+   shape at that level (the core's :func:`~fesdic_core.driver.measure`); with fixed
+   cameras, the search's last Gauss-Newton is the measurement, and the core's
+   :func:`~fesdic_core.driver.conclude` gives its verdict and uncertainty.
 
 The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.uncertainty`:
 image noise through the image model, scaled to the residual the FE model leaves), or the
@@ -31,7 +33,7 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from fesdic_core.driver import Measurement, MeasurementSettings, measure
+from fesdic_core.driver import Measurement, MeasurementSettings, conclude, measure
 from fesdic_core.edges import edge_margin_mask
 from fesdic_core.image import pyramid
 from fesdic_core.shape import shape_gauss_newton
@@ -220,7 +222,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
 
     level, q, state = start, first.q, first.state
-    trials, iterations, current, visited = [], 0, None, {start}
+    trials, iterations, current, visited, kept = [], 0, None, {start}, None
     while True:
         # the optimum of every level (Eq. 21 at the level), predicted from the current system
         moves = {other: _move_to(space, other, state.H, state.b, q, finest)
@@ -250,10 +252,11 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
                                    cams, solver, finest, settings.normalisation, settings.max_iter,
-                                   settings.tol_mm * 2.0 ** finest, extra_mask=mask)
+                                   settings.tol_mm * 2.0 ** finest, extra_mask=mask,
+                                   keep_derivative=True)
         iterations += shape.iterations
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
-                                       settings.normalisation, mask)
+                                       settings.normalisation, mask, residual=shape.residual)
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
                           trial_state.residual.std_percent, True, trial_state.n_points)
         trials.append(measured)
@@ -261,9 +264,20 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                     best.level, measured.residual_percent, measured.criterion, measured.gain)
         if measured.criterion >= current.criterion:
             break
-        level, q, state, current = best.level, shape.q, trial_state, measured
+        level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
     solver = GeometricRegularization(space, {finest: level})
-    if level != start:
+    if level != start and not settings.calibrate:
+        # the cameras are fixed: the search's last Gauss-Newton is the measurement at the
+        # chosen level; the verdict and the uncertainty are the core's (conclude)
+        report = dataclasses.replace(first.scales[-1], residual_percent=kept.residual.std_percent,
+                                     shape_converged=kept.converged,
+                                     n_points=int(kept.residual.mask.sum()))
+        final = conclude(model.mesh, imgs, first.cameras, solver, settings, q, quad, normals,
+                         kept.residual, first.scales[:-1] + (report,), first.noise.sigma_gray,
+                         mask=mask, final=kept.residual, history=first.history,
+                         iterations=first.iterations + iterations,
+                         time_s=first.time_s + (time.perf_counter() - t0))
+    elif level != start:                # calibrating: one more fixed point at the chosen level
         final = measure(model.mesh, images, first.cameras, solver,
                         dataclasses.replace(settings, scales=(finest,)), q0=q)
         final = dataclasses.replace(final, history=first.history + final.history,

@@ -421,21 +421,41 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                     report.residual_percent, report.noise_percent)
         if progress is not None:
             progress(k, len(settings.scales), report)
+    residual, quad = result
+    return conclude(mesh, imgs, cams, solver, settings, q, quad, normals, residual, tuple(reports),
+                    noise.sigma_gray, mask=mask, final=final, history=tuple(log.records),
+                    iterations=total_iterations, time_s=time.perf_counter() - t0)
+
+
+def conclude(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence, solver,
+             settings: MeasurementSettings, q: np.ndarray, quad: PixelQuadrature,
+             normals: np.ndarray, residual: GrayLevelResidual, reports: tuple, sigma_gray,
+             mask=None, final: GrayLevelResidual | None = None, history: tuple = (),
+             iterations: int = 0, time_s: float = 0.0) -> Measurement:
+    """The verdict (:func:`judge`), the uncertainty and the :class:`Measurement` of a state
+    reached at the finest scale.
+
+    ``images``: the two images at the finest scale of ``settings``; ``cameras``: the final
+    cameras at full resolution;
+    ``residual``: the residual at ``q`` on ``quad`` (``final``: the same with ``dr_dX``, if
+    kept); ``reports``: one :class:`ScaleReport` per scale, the finest last; ``sigma_gray``:
+    the images' noise (:func:`~fesdic_core.noise.residual_noise_floor`); ``mask``: the points
+    left out at the finest scale. Used by :func:`measure`, and by a caller that moved the
+    state at the finest scale itself (a level search).
+    """
     failure = judge(reports[-1].residual_percent, reports[-1].noise_percent, q, mesh.nodes,
                     reports[-1], settings)
     if failure is not None:
         logger.info("measurement failed: %s", failure)     # the caller reads m.failure
-    residual, quad = result
     extras = {}
+    finest = settings.scales[-1]
     if settings.uncertainty and np.all(np.isfinite(q)):
-        extras = _uncertainty(mesh, normals, node_weights, q, quad, imgs,
-                              [c.scaled(settings.scales[-1]) for c in cams], solver, settings,
-                              mask, noise.sigma_gray, final)
+        extras = _uncertainty(mesh, normals, nodal_areas(mesh), q, quad, images,
+                              [c.scaled(finest) for c in cameras], solver, settings,
+                              mask, sigma_gray, final)
     return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
-                       cameras=tuple(cams), residual=dataclasses.replace(residual, dr_dX=None),
-                       quadrature=quad,
-                       history=tuple(log.records), iterations=total_iterations,
-                       time_s=time.perf_counter() - t0,
+                       cameras=tuple(cameras), residual=dataclasses.replace(residual, dr_dX=None),
+                       quadrature=quad, history=history, iterations=iterations, time_s=time_s,
                        converged=failure is None and all(r.converged for r in reports),
                        noise_percent=reports[-1].noise_percent, failure=failure,
                        scales=tuple(reports), **extras)

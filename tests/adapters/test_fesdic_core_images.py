@@ -6,6 +6,9 @@
 - the bias of a FIXED set of coarse spline levels on a feature shorter than their knot spans
   (``bump_scene``: a 0.3 mm Gaussian bump, sigma 2 mm, on a flat 60 x 40 mm plate).
 """
+import numpy as np
+import pytest
+
 from adapters.fesdic_core import georeg_solver, nominal_model
 from adapters.level_search import measure_auto_levels
 from fesdic_core.driver import MeasurementSettings, measure
@@ -64,3 +67,7 @@ def test_automatic_level_is_not_worse_than_fe_on_a_short_feature(bump_scene):
     assert geo.ok, geo.failure
     assert search.chosen < search.start and solver.level(0) == search.chosen
     assert geo_error <= fe_error, (geo_error, fe_error)
+    # the measurement at the chosen level carries the core's verdict and uncertainty
+    assert geo.converged and geo.scales[-1].residual_percent == pytest.approx(geo.residual_percent)
+    assert geo.shape_std_mm is not None and np.all(np.isfinite(geo.shape_std_mm))
+    assert geo.state.H.shape == (model.mesh.n_nodes,) * 2 and geo.noise.variance > 0
