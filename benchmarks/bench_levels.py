@@ -48,14 +48,10 @@ run this script with that venv's python. With ``riley`` the script first checks 
 camera conversion: a flat plate rendered by riley with bilinear sampling and the core's
 sub-pixel grid must equal the core's render.
 
-Measured: the tests' scale (``--quick``, core renderer with 6 x 6 rays per pixel) on the
-final level search (information criterion, ladder halving the FE mesh's knots, 0.5 px
-prefilter) is the table of tests/adapters/test_never_worse_than_fe.py and README "Level
-choice": auto <= FE on every shape, <= the best Tikhonov length on all but the flat plate
-(0.19 um against Tikhonov auto's 0.04). An earlier state of the search (Mallows' Cp, a
-ladder jumping from 8 x 8 knot spans to the mesh, 3 x 3 rays) climbed to the mesh's spline
-on every family shape and added 100-240 % to the time of 3 fixed levels where it climbed;
-the demo-scale and riley tables were measured on that state and are to be re-run.
+Measured: the tests' scale (``--quick``, core renderer) is the table of
+tests/adapters/test_never_worse_than_fe.py and README "Level choice"; the riley table at the
+demo's scale (``--renderer riley --repeat 1 --shapes twisted 10 20 --noise 0 2``) is in README
+too. Both on the search that moves both ways, with the 2 px edge margin.
 
 Run: ``python benchmarks/bench_levels.py [--quick] [--renderer core|riley|both] [--repeat 3]
 [--shapes twisted flat 2 5 10 20] [--noise 0 2] [--supersample 6] [--riley-subsample 4]``
