@@ -425,9 +425,14 @@ def main(argv=None) -> int:
             print(f"\n{case.name}, noise {noise:g} gray levels, {arrays[0].shape[1]} x "
                   f"{arrays[0].shape[0]} px ({args.renderer} renderer), load {os.getloadavg()[0]:.1f}",
                   flush=True)
-            case_rows = run_case(case, arrays, noise, args, args.workdir / f"{shape}_{noise:g}")
+            try:
+                case_rows = run_case(case, arrays, noise, args, args.workdir / f"{shape}_{noise:g}")
+            except (RuntimeError, ValueError, ArithmeticError, OSError) as err:   # the next case
+                print(f"  FAILED: {type(err).__name__}: {err}", flush=True)
+                continue
             print_rows(case_rows)
             rows += case_rows
+            (args.workdir / "rows.json").write_text(json.dumps(rows, indent=1))
     print(f"\nload average {os.getloadavg()[0]:.1f} at the end; in-process: median of {args.repeat} "
           "interleaved runs (FE and Tikhonov: one run); whole process: median of "
           f"{args.repeat if args.whole else 0} runs\n")
