@@ -292,6 +292,111 @@ def whole_process(command: list, threads: int) -> float:
     return seconds
 
 
+# ----------------------------------------------------------------------------- the real pair
+#: the PNG pair of data/dic_challenge_stereo is the original frames cropped at (384, 128)
+CROP_PX = (384.0, 128.0)
+#: cam0 quadrilaterals (original frames, px) of the data README: base plate region, block top
+README_REGIONS_PX = {"base": [(1121, 967), (1982, 996), (2002, 1701), (1130, 1716)],
+                     "block_top": [(714, 1039), (1058, 1040), (1060, 1373), (714, 1377)]}
+
+
+def real_inputs(folder: Path):
+    """The Stereo DIC Challenge pair as both codes get it: the cropped PNGs, pyvale's
+    calibration with the principal points shifted by the crop, pyvale's own ROI and seeds
+    (its example ``ex10_dic_chal``) shifted by the crop. Returns (arrays, Calib, roi, seeds)."""
+    import shutil
+    import cv2
+    import yaml
+    from pyvale import calib, data, dic
+    src = REPO / "data" / "dic_challenge_stereo"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("cam0.png", "cam1.png"):
+        shutil.copy(src / name, folder / name)
+    shutil.copy(src / "calibration_cropped.csv", folder / "calibration.csv")
+    arrays = [cv2.imread(str(folder / f"cam{k}.png"), cv2.IMREAD_GRAYSCALE) for k in (0, 1)]
+    entries = yaml.safe_load(Path(data.dic_ex10_dic_chal_roi()).read_text())
+    for e in entries:
+        if e["type"] == "PolyLineROI":
+            e["points"] = [[float(x - CROP_PX[0]), float(y - CROP_PX[1])] for x, y in e["points"]]
+        else:
+            e["pos"] = [float(e["pos"][0] - CROP_PX[0]), float(e["pos"][1] - CROP_PX[1])]
+    (folder / "roi.yaml").write_text(yaml.safe_dump(entries))
+    roi = dic.RegionOfInterest(arrays[0])
+    roi.read_yaml(folder / "roi.yaml")
+    np.save(folder / "roi.npy", roi.mask)
+    (folder / "seed.json").write_text(json.dumps([int(v) for v in roi.seed]))
+    return arrays, calib.loadtxt(folder / "calibration.csv"), roi.mask, [int(v) for v in roi.seed]
+
+
+def pyvale_faces_um(folder: Path) -> dict:
+    """pyvale's points of its last run in ``folder``: RMS (um) to the best-fit plane and quadric
+    over the README base region, to the plane over the README block top (subset centres in
+    the quadrilaterals), and the points delivered."""
+    from pyvale import dic
+    from challenge import analysis
+    res = dic.import_3d(data=str(folder / "dic_results_*"), delimiter=",", binary=True,
+                        layout="column", print_level=0)
+    s = res.stereo
+    X = np.column_stack([np.ravel(s.x_mm[0]), np.ravel(s.y_mm[0]), np.ravel(s.z_mm[0])])
+    px = np.column_stack([np.ravel(res.ss_x), np.ravel(res.ss_y)]) + np.array(CROP_PX)
+    ok = np.all(np.isfinite(X), axis=1)
+    out = {"points": int(ok.sum())}
+    for name, quad in README_REGIONS_PX.items():
+        P = X[ok & analysis.inside_polygon(px, np.array(quad, float))]
+        out[name] = (1e3 * analysis.rms(analysis.plane_residuals(P)),
+                     1e3 * analysis.rms(analysis.quadric_residuals(P)), len(P))
+    return out
+
+
+def run_real(args, folder: Path) -> list[dict]:
+    """pyvale (steps of ``--steps``) and our example (examples/dic_challenge, all four faces)
+    on the real pair; flatness figures in the README's regions, points, times."""
+    sys.path.insert(0, str(REPO / "examples" / "dic_challenge"))
+    from challenge.pipeline import FACES, compare, run_challenge
+    arrays, calibration, roi, seeds = real_inputs(folder)
+    keys = [f"pyvale {s}" for s in args.steps] + ["ours"]
+    times, whole, figures = {k: [] for k in keys}, {k: [] for k in keys}, {}
+    for r in range(args.repeat):
+        for step in args.steps:
+            out = folder / f"inproc_{step}"
+            _, seconds = pyvale_points(arrays, calibration, roi, seeds, step, args.threads, out)
+            times[f"pyvale {step}"].append(seconds)
+            figures[f"pyvale {step}"] = pyvale_faces_um(out)
+        t0 = time.perf_counter()
+        run = run_challenge(REPO / "examples" / "dic_challenge", FACES)
+        times["ours"].append(time.perf_counter() - t0)
+        c = compare(run)
+        figures["ours"] = {"points": sum(int(np.count_nonzero(v.seen)) for v in run.results.values()),
+                           "base": (1e3 * c.base_plane_rms_mm, 1e3 * c.base_quadric_rms_mm, None),
+                           "block_top": (1e3 * c.block.top_rms_plane_mm, np.nan, c.block.n_top)}
+        if args.whole:
+            for step in args.steps:
+                whole[f"pyvale {step}"].append(whole_process(
+                    [sys.executable, __file__, "--pyvale-worker", str(folder), "--steps", str(step),
+                     "--threads", str(args.threads)], args.threads))
+            out = folder / f"ours_out_{r}"
+            whole["ours"].append(whole_process(
+                [sys.executable, str(REPO / "examples" / "dic_challenge" / "run.py"), "--quiet",
+                 "--out", str(out)], args.threads))
+    rows = []
+    for key in keys:
+        f = figures[key]
+        label = f"pyvale, subset {SUBSET_PX} px, step {key.split()[1]}" if key.startswith("pyvale") \
+            else "ours (examples/dic_challenge, 4 faces, 6 measurements)"
+        rows.append(dict(method=label, base_plane_um=f["base"][0], base_quadric_um=f["base"][1],
+                         block_top_um=f["block_top"][0], points=f["points"],
+                         inproc_s=statistics.median(times[key]),
+                         whole_s=statistics.median(whole[key]) if whole[key] else np.nan))
+    print("  | method | base plate, README region: RMS to plane / quadric (um) | block top: RMS to "
+          "its plane (um) | points | in-process (s) | whole process (s) |")
+    print("  |---|---|---|---|---|---|")
+    for r in rows:
+        print(f"  | {r['method']} | {r['base_plane_um']:.2f} / {r['base_quadric_um']:.2f} | "
+              f"{r['block_top_um']:.2f} | {r['points']} | {r['inproc_s']:.1f} | {r['whole_s']:.1f} |",
+              flush=True)
+    return rows
+
+
 # ----------------------------------------------------------------------------- the run
 def errors_um(points_world: np.ndarray, case: Case, camera, inner) -> tuple[float, float]:
     """RMS distance (um) to the truth after the bounded rigid alignment: all points, and the
@@ -386,7 +491,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                                      epilog="Without pyvale installed the script prints 'skipped' "
                                             "and exits 0.")
     parser.add_argument("--repeat", type=int, default=3, help="interleaved timed runs (median)")
-    parser.add_argument("--shapes", nargs="+", default=list(SHAPES), choices=list(SHAPES))
+    parser.add_argument("--shapes", nargs="*", default=list(SHAPES), choices=list(SHAPES),
+                        help="synthetic cases (none: only --real)")
+    parser.add_argument("--real", action="store_true",
+                        help="also the real Stereo DIC Challenge pair (data/dic_challenge_stereo)")
     parser.add_argument("--noise", nargs="+", type=float, default=[0.0, 2.0],
                         help="noise levels (gray levels, std)")
     parser.add_argument("--steps", nargs="+", type=int, default=[4, 10], help="pyvale subset steps (px)")
@@ -433,10 +541,15 @@ def main(argv=None) -> int:
             print_rows(case_rows)
             rows += case_rows
             (args.workdir / "rows.json").write_text(json.dumps(rows, indent=1))
+    if args.real:
+        print(f"\nStereo DIC Challenge 1.0, real pair (1760 x 1664 px), load {os.getloadavg()[0]:.1f}",
+              flush=True)
+        run_real(args, args.workdir / "real")
     print(f"\nload average {os.getloadavg()[0]:.1f} at the end; in-process: median of {args.repeat} "
           "interleaved runs (FE and Tikhonov: one run); whole process: median of "
           f"{args.repeat if args.whole else 0} runs\n")
-    print_rows(rows, markdown=True)
+    if rows:
+        print_rows(rows, markdown=True)
     return 0
 
 
