@@ -150,17 +150,14 @@ class Case:
 def build_case(shape: str) -> Case:
     sys.path.insert(0, str(REPO / "tests"))
     import scenes
-    from fesdic_core.render import demo_cameras, speckle_mm_for, twisted_plate
+    from fesdic_core.render import demo_cameras, speckle_mm_for
     from georeg_app.config import GeometryConfig
-    from georeg_app.pipeline import DEMO
-    if shape == "twisted":
+    from georeg_app.pipeline import DEMO, demo_specimen
+    if shape == "twisted":                                 # as georeg_app.pipeline.demo_config
         d = DEMO
         cameras = demo_cameras(image_size=d["image_size"], stereo_angle_deg=d["stereo_angle_deg"],
                                field_mm=d["field_mm"])
-        specimen = twisted_plate(d["length_mm"], d["width_mm"], corner_mm=d["corner_mm"],
-                                 hole_radius_mm=d["hole_radius_mm"], waviness_mm=d["waviness_mm"],
-                                 view_length_mm=d["view_mm"], speckle_mm=speckle_mm_for(cameras[0], 4.0),
-                                 seed=7)
+        specimen = dataclasses.replace(demo_specimen(), speckle_mm=speckle_mm_for(cameras[0], 4.0))
         geometry = GeometryConfig(kind="plate_with_hole", length_mm=d["view_mm"],
                                   width_mm=d["width_mm"], hole_radius_mm=d["hole_radius_mm"])
         return Case("twisted plate", specimen, tuple(cameras), geometry, 11)
