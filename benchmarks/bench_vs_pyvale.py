@@ -25,6 +25,16 @@ each noise-free and with 2 gray levels of Gaussian noise (``--noise``), rendered
 core's ray caster (``--supersample`` rays per pixel side) or by riley-raster
 (``--renderer riley``, see benchmarks/bench_levels.py's ``riley_render``).
 
+``--real`` adds the real Stereo DIC Challenge 1.0 pair (``data/dic_challenge_stereo``, the
+PNGs cropped from the original frames, 1760 x 1664 px): pyvale with its own example's ROI
+polygon and seeds (``ex10_dic_chal``, shifted by the crop) and the calibration of the data
+(principal points shifted by the crop), against ``examples/dic_challenge`` (all four faces,
+six measurements, the fixed point of calibration and shape from the landmarks). No truth
+there: the figures are the flatness of the base plate in the data README's region (RMS to
+the best-fit plane and quadric, pyvale's points selected by their camera-0 subset centre in
+the README's quadrilateral, ours by the same region in mm) and of the block top (RMS to its
+plane; pyvale: the README's block-top quadrilateral, ours: the whole measured block top).
+
 What each code is given: the two 8-bit images; the EXACT cameras (pyvale: its calibration
 ``Calib`` with camera 1 placed by the exact stereo transform; ours: the JSON camera file of
 the exact cameras); the region of the specimen: pyvale's ROI mask is the set of camera-0
@@ -54,7 +64,7 @@ outputs: VTU, figures, report). The machine, its load and the versions are print
 
 Run: ``python benchmarks/bench_vs_pyvale.py [--repeat 3] [--shapes flat twisted smooth
 narrow] [--noise 0 2] [--steps 4 10] [--methods georeg fe tikhonov] [--renderer core|riley]
-[--no-whole] [--workdir DIR]``
+[--no-whole] [--real] [--workdir DIR]``
 """
 from __future__ import annotations
 
