@@ -215,7 +215,7 @@ def noisy(arrays, noise_std: float, seed: int) -> list:
 
 def roi_and_seed(case: Case) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """pyvale's ROI (camera-0 pixels seeing the nominal region on z = 0), the same eroded
-    by a subset (centres of whole subsets inside it) and a seed near the ROI's centre."""
+    by a subset (centres of whole subsets inside it) and a seed where the ROI is deepest."""
     import cv2
     from fesdic_core.render import pixel_rays
     cam = case.cameras[0]
@@ -227,9 +227,9 @@ def roi_and_seed(case: Case) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     roi = case.inside(xy).reshape(h, w)
     inner = cv2.erode(roi.astype(np.uint8), np.ones((SUBSET_PX, SUBSET_PX), np.uint8),
                       borderValue=0).astype(bool)
-    ys, xs = np.nonzero(inner)
-    k = np.argmin(np.hypot(xs - np.median(xs), ys - np.median(ys)))
-    return roi, inner, (int(xs[k]), int(ys[k]))
+    depth = cv2.distanceTransform(inner.astype(np.uint8), cv2.DIST_L2, 5)
+    y0, x0 = np.unravel_index(np.argmax(depth), depth.shape)     # the farthest from its edges
+    return roi, inner, (int(x0), int(y0))
 
 
 def in_region(points_world: np.ndarray, camera, inner: np.ndarray) -> np.ndarray:
@@ -429,8 +429,12 @@ def run_case(case: Case, arrays, noise: float, args, folder: Path) -> list[dict]
     results = {}
     for r in range(args.repeat):
         for step in args.steps:
-            X, seconds = pyvale_points(arrays, calibration, roi, seed, step, args.threads,
-                                       folder / f"inproc_{step}")
+            try:
+                X, seconds = pyvale_points(arrays, calibration, roi, seed, step, args.threads,
+                                           folder / f"inproc_{step}")
+            except RuntimeError as err:                   # e.g. its seed did not converge
+                results[f"pyvale {step}"] = (None, None, f"FAILED ({err})")
+                continue
             times[f"pyvale {step}"].append(seconds)
             results[f"pyvale {step}"] = ((X - t0) @ R0, case.cameras[0], "ok")   # to the world
         for method in args.methods:
@@ -441,9 +445,10 @@ def run_case(case: Case, arrays, noise: float, args, folder: Path) -> list[dict]
             results[method] = (None if m is None else m.nodes, None if m is None else m.cameras[0], status)
         if args.whole:
             for step in args.steps:
-                whole[f"pyvale {step}"].append(whole_process(
-                    [sys.executable, __file__, "--pyvale-worker", str(folder), "--steps", str(step),
-                     "--threads", str(args.threads)], args.threads))
+                if results[f"pyvale {step}"][0] is not None:
+                    whole[f"pyvale {step}"].append(whole_process(
+                        [sys.executable, __file__, "--pyvale-worker", str(folder), "--steps",
+                         str(step), "--threads", str(args.threads)], args.threads))
             if "georeg" in args.methods:
                 whole["georeg"].append(whole_process(
                     [sys.executable, "-m", "georeg_app", "--quiet", "measure",
@@ -458,7 +463,8 @@ def run_case(case: Case, arrays, noise: float, args, folder: Path) -> list[dict]
                   "tikhonov": f"Tikhonov {TIKHONOV_MM:g} mm (ours)"}[key]
         rows.append(dict(case=case.name, noise=noise, method=label, all_um=all_um, same_um=same_um,
                          points=0 if points is None else len(points), status=status,
-                         inproc_s=statistics.median(times[key]), runs=len(times[key]),
+                         inproc_s=statistics.median(times[key]) if times[key] else np.nan,
+                         runs=len(times[key]),
                          whole_s=statistics.median(whole[key]) if whole[key] else np.nan))
     return rows
 
@@ -470,7 +476,7 @@ def print_rows(rows: list[dict], markdown: bool = False) -> None:
         print("|---|---|---|---|---|---|---|---|")
         for r in rows:
             whole = "" if not np.isfinite(r["whole_s"]) else f"{r['whole_s']:.1f}"
-            flag = "" if r["status"].startswith("ok") else " (verdict failed)"
+            flag = "" if r["status"].startswith("ok") else f" ({r['status']})"
             print(f"| {r['case']} | {r['noise']:g} | {r['method']}{flag} | {r['all_um']:.2f} | "
                   f"{r['same_um']:.2f} | {r['points']} | {r['inproc_s']:.1f} | {whole} |")
         return
