@@ -62,6 +62,12 @@ script reading the PNGs, the calibration CSV and the ROI, running ``calculate_3d
 reading its points back; ours: ``python -m georeg_app measure CONFIG.toml`` writing all its
 outputs: VTU, figures, report). The machine, its load and the versions are printed.
 
+Measured (PROPOSED_README / README "Side by side with pyvale", 2 cores under a load of 9-16):
+in the same region georeg is below pyvale on the flat and twisted plates at both noise
+levels and on the noise-free bumps; pyvale is below georeg on the noisy smooth bump and over
+all points (our boundary band), and faster on every case (step 4: 1.7-2.8 times in
+process), though the load slows our measurement far more than pyvale's C++.
+
 Run: ``python benchmarks/bench_vs_pyvale.py [--repeat 3] [--shapes flat twisted smooth
 narrow] [--noise 0 2] [--steps 4 10] [--methods georeg fe tikhonov] [--renderer core|riley]
 [--no-whole] [--real] [--workdir DIR]``
