@@ -34,7 +34,6 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from fesdic_core.driver import Measurement, MeasurementSettings, conclude, measure
-from fesdic_core.edges import edge_margin_mask
 from fesdic_core.image import pyramid
 from fesdic_core.shape import shape_gauss_newton
 from fesdic_core.solvers import seen_dofs
@@ -213,10 +212,9 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
     cams = [c.scaled(finest) for c in first.cameras]
     quad, normals = first.quadrature, first.normals
-    mask = None                                   # the core's edge margin at the finest scale
-    if settings.edge_margin_px > 0:
-        mask = edge_margin_mask(quad.points(first.nodes), quad, model.mesh, first.nodes, cams,
-                                settings.edge_margin_px / 2.0 ** finest)
+    # the points of the start's final residual (the core's edge margin and the images' bounds
+    # included): every level's cost is a sum over the same points, so the criteria compare
+    mask = first.residual.mask
 
     def residual_of(chi: float, state) -> float:                 # std scales like sqrt(c)
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
