@@ -41,7 +41,8 @@ from fesdic_core.uncertainty import linearised_state
 from fesdic_core.mesh import node_normals
 from georeg_plugin.operators import MultilevelSpace, nested_space
 from georeg_plugin.refine import insert_knots, refine_uniform
-from georeg_plugin.selection import LevelTrial, information_criterion, noise_gain, predicted_fit
+from georeg_plugin.selection import (LevelTrial, information_criterion, noise_gain, penalty_per_dof,
+                                     predicted_fit)
 from georeg_plugin.solver import GeometricRegularization
 
 from .fesdic_core import NominalModel
@@ -238,11 +239,11 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                        for chi in [predicted_fit(state.chi_square, state.b, d, state.H)]]
         trials += predictions
         better = [t for t in predictions if t.criterion < current.criterion]
-        logger.info("level search: level %d (%d dofs) BIC %.6g; predicted gains per dof %s "
-                    "(threshold ln N = %.3g; noise variance %.3g = %.3g kappa)", level,
+        logger.info("level search: level %d (%d dofs) criterion %.6g; predicted gains per dof %s "
+                    "(threshold 2 ln ln N = %.3g; noise variance %.3g = %.3g kappa)", level,
                     current.dofs, current.criterion,
                     ", ".join(f"level {t.level}: {t.gain:.3g}" for t in predictions),
-                    np.log(state.n_points), variance, variance / kappa)
+                    penalty_per_dof(state.n_points), variance, variance / kappa)
         if not better:
             break
         best = min(better, key=lambda t: t.criterion)              # the best predicted level
@@ -258,7 +259,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
                           trial_state.residual.std_percent, True, trial_state.n_points)
         trials.append(measured)
-        logger.info("level search: level %d measured: residual %.4f%%, BIC %.6g, gain %.3g",
+        logger.info("level search: level %d measured: residual %.4f%%, criterion %.6g, gain %.3g",
                     best.level, measured.residual_percent, measured.criterion, measured.gain)
         if measured.criterion >= current.criterion:
             break

@@ -194,7 +194,7 @@ def _chosen(result) -> str:
 
 def level_search_html(run) -> str:
     """Per georeg method with automatic levels: the levels looked at, their dofs, residual,
-    information criterion (BIC) and the statistic (gain per added dof in units of the noise
+    information criterion (Hannan-Quinn) and the statistic (gain per added dof in units of the noise
     variance)."""
     parts = []
     for r in run.results:
@@ -209,11 +209,11 @@ def level_search_html(run) -> str:
             f"<h3>{html.escape(r.spec.label)}: level search</h3><p>Levels of the ladder "
             f"{search.n_levels} (0 = the spline of the FE mesh), start {search.start}, chosen "
             f"{search.chosen}; noise variance kappa {_f(search.variance)}; added time "
-            f"{_f(search.time_s, 3)} s. A level is taken when it lowers the Bayesian "
+            f"{_f(search.time_s, 3)} s. A level is taken when it lowers the Hannan-Quinn "
             "information criterion: a finer one when its fall of the cost per added dof exceeds "
-            "ln N times the noise variance, a coarser one when its rise per removed dof stays "
+            "2 ln ln N times the noise variance, a coarser one when its rise per removed dof stays "
             "below it (N integration points; noise alone gives about 1).</p>"
-            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>BIC</th>"
+            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>criterion</th>"
             f"<th>gain per dof (kappa)</th><th></th></tr>{rows}</table>")
     return "".join(parts)
 

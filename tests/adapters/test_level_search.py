@@ -6,7 +6,7 @@ import scipy.sparse as sps
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
 from adapters.level_search import _move_to, ladder
 from georeg_plugin.geometries import plate_with_hole, rectangle
-from georeg_plugin.selection import information_criterion, noise_gain, predicted_fit
+from georeg_plugin.selection import information_criterion, noise_gain, penalty_per_dof, predicted_fit
 from georeg_plugin.solver import GeometricRegularization
 
 
@@ -85,7 +85,8 @@ def test_move_to_any_level_is_exact_for_a_linear_problem():
 
 
 def test_criterion_and_gain():
-    assert information_criterion(10.0, 5, 0.5, 1000) == pytest.approx(10.0 + 2.5 * np.log(1000))
+    assert information_criterion(10.0, 5, 0.5, 1000) == pytest.approx(10.0 + 2.5 * 2 * np.log(np.log(1000)))
+    assert penalty_per_dof(10 ** 6) == pytest.approx(5.2516, abs=1e-4)     # 2 ln ln N, a megapixel pair
     assert noise_gain(10.0, 4, 7.0, 7, 0.5) == pytest.approx(2.0)      # (10 - 7) / (0.5 * 3)
     assert np.isnan(noise_gain(10.0, 4, 7.0, 4, 0.5))
     assert noise_gain(7.0, 7, 10.0, 4, 0.5) == pytest.approx(2.0)      # coarser: rise per removed dof
@@ -93,7 +94,7 @@ def test_criterion_and_gain():
 
 def test_noise_alone_never_passes_the_criterion():
     """Pure noise of variance kappa on a linear problem: the gain per added dof is ~1, so
-    the criterion (threshold ln N = 8 here) keeps the coarse level in every draw."""
+    the criterion (threshold 2 ln ln N = 4.2 here) keeps the coarse level in every draw."""
     model = nominal_model(rectangle(30.0, 20.0), (8, 8), "Q9")
     space = ladder(model)
     rng = np.random.default_rng(1)
