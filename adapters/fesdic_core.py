@@ -18,6 +18,7 @@ import numpy as np
 
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
+from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
@@ -26,7 +27,7 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline", "measured_spline_std",
+__all__ = ["NominalModel", "nominal_model", "georeg_solver", "is_curved", "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
 
@@ -103,14 +104,25 @@ def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str)
                     "spans, or fewer levels")
 
 
-def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False) -> MultilevelSpace:
+def is_curved(model: NominalModel) -> bool:
+    """True if the nominal surface is not planar (control points off one plane)."""
+    return not is_flat([model.patch])
+
+
+def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None = None
+                        ) -> MultilevelSpace:
     """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
 
-    ``curved`` weights ``C^T[I, J]`` by ``n_I . n_J`` (normals from the core), for nominal
-    surfaces that are not planar. For a mesh made from the spline (``model.uv``) the
+    ``curved``: the vector formulation of :mod:`georeg_plugin.curved` (control vectors
+    seen along the core's node normals: nested levels, rigid motions in range); ``None``
+    (default) chooses it when the nominal surface is not planar (:func:`is_curved`), the
+    scalar ``C^T[I, J] = R_J(xi_I)`` on a flat one (on which both have the same range).
+    For a mesh made from the spline (``model.uv``) the
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
     """
+    if curved is None:
+        curved = is_curved(model)
     normals = node_normals(model.mesh) if curved else None
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
     space = multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
@@ -121,28 +133,31 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False
 
 
 def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,
-                  curved: bool = False) -> GeometricRegularization:
+                  curved: bool | None = None) -> GeometricRegularization:
     """The plugin's solve hook for the core: level ``schedule[scale]`` at each image scale.
 
     By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
-    the paper's section 3.3), clipped to the coarsest level.
+    the paper's section 3.3), clipped to the coarsest level. ``curved``: see
+    :func:`multilevel_for_mesh`.
     """
     return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
 
 
 def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int = 0
                     ) -> tuple[SplinePatch, np.ndarray]:
-    """The measured shape as a spline of ``level`` (Eq. 21): control points moved along normals.
+    """The measured shape as a spline of ``level`` (Eq. 21): control points moved along
+    normals (flat nominal) or by the vector formulation's control vectors (curved).
 
-    Returns the patch and the control values ``q_s`` (mm along each control normal).
-    ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in the level's space.
+    Returns the patch and the control values (mm, each control point's displacement along
+    its control normal). ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in
+    the level's space.
     """
     space = solver.space
     q_s = solver.control_values(q, level)
     values = space.control_point_values(q_s, level)
     patch = space.patch(level)
-    moved = patch.control_points + values.reshape(patch.control_points.shape[:2])[..., None] \
-        * patch.control_normals().reshape(patch.control_points.shape)
+    moved = patch.control_points + space.control_vectors(q_s, level).reshape(
+        patch.control_points.shape)
     return dataclasses.replace(patch, control_points=moved), values
 
 
@@ -153,5 +168,11 @@ def measured_spline_std(solver: GeometricRegularization, H, variance: float, lev
     rigid modes). One value per control point, as :func:`measured_spline`'s values."""
     space = solver.space
     H_s, _ = solver.project(H, np.zeros(space.n_fe), level)
-    variance_s = variance * np.diag(np.linalg.inv(H_s.toarray()))
+    inverse = np.linalg.inv(H_s.toarray())
+    if space.vector:                    # d_J . n_J = t_J^T q_s: variance t_J^T H_s^-1 t_J
+        normals = np.vstack([p.control_normals() for p in space.level_patches(level)])
+        T = space.vector[level].coefficients.reshape(len(normals), 3, -1)
+        t = np.einsum("jkr,jk->jr", T, normals)
+        return np.sqrt(np.clip(variance * np.einsum("jr,rs,js->j", t, inverse, t), 0.0, None))
+    variance_s = variance * np.diag(inverse)
     return np.sqrt(np.clip(space.control_point_values(variance_s, level), 0.0, None))
