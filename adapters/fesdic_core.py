@@ -20,6 +20,7 @@ from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
 from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
+from georeg_plugin.multipatch import part_mesh, part_space
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
@@ -27,7 +28,7 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "georeg_solver", "is_curved", "measured_spline", "measured_spline_std",
+__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "is_curved", "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
 
@@ -37,14 +38,35 @@ class NominalModel:
 
     Attributes
     ----------
-    patch : the coarsest spline of the nominal geometry (the CAD model).
+    patch : the coarsest spline of the nominal geometry (the CAD model); for a part of
+        several faces, its first face.
     mesh : the analysis-suitable FE mesh of the core (Eq. 17).
-    uv : (n, 2) parameters of the FE nodes on ``patch`` (None for a legacy mesh).
+    uv : (n, 2) parameters of the FE nodes on ``patch`` (None for a legacy mesh); for a
+        part, on the face ``node_face`` of each node.
+    faces : the coarsest splines of every face of a part (:func:`part_model`), or empty
+        (one patch: ``patch``).
+    node_face : (n,) face of each node's ``uv`` (parts only).
+    element_face : (n_elements,) face of each element (parts only; the VTU's ``face``).
+    face_names : one name per face (parts only).
     """
 
     patch: SplinePatch
     mesh: SurfaceMesh
     uv: np.ndarray | None
+    faces: tuple = ()
+    node_face: np.ndarray | None = None
+    element_face: np.ndarray | None = None
+    face_names: tuple = ()
+
+    @property
+    def patches(self) -> tuple:
+        """Every face's coarsest spline (``(patch,)`` for a one-patch model)."""
+        return tuple(self.faces) if self.faces else (self.patch,)
+
+    @property
+    def is_part(self) -> bool:
+        """True for a part of several faces (:func:`part_model`)."""
+        return bool(self.faces)
 
 
 def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: str = "Q9",
@@ -74,6 +96,35 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
     block = CellBlock(family=family_from_meshio(fe.cell_type), connectivity=fe.connectivity)
     return NominalModel(patch=patch, mesh=SurfaceMesh(nodes=fe.nodes, blocks=(block,), name=name),
                         uv=fe.uv)
+
+
+def part_model(faces, refinements: int, names=None, family: str = "Q9",
+               name: str = "part") -> NominalModel:
+    """FE mesh of a part of several faces (:func:`georeg_plugin.multipatch.part_mesh`):
+    every face refined ``refinements`` times dyadically, welded along shared edges.
+
+    Raises :class:`~georeg_plugin.multipatch.NonConformingFacesError` naming two faces whose
+    shared edge's nodes do not coincide."""
+    faces = tuple(faces)
+    fine = [refine_uniform(f, int(refinements))[0] for f in faces]
+    part = part_mesh(fine, names, family)
+    block = CellBlock(family=family_from_meshio(part.cell_type), connectivity=part.connectivity)
+    return NominalModel(patch=faces[0], mesh=SurfaceMesh(nodes=part.nodes, blocks=(block,),
+                                                         name=name),
+                        uv=part.uv, faces=faces, node_face=part.node_face,
+                        element_face=part.element_face, face_names=part.face_names)
+
+
+def _check_part_levels(model: NominalModel, n_levels: int) -> None:
+    """Each face's FE elements must refine its finest spline level (Eq. 16): a mesh of
+    :func:`part_model` has ``4^k`` elements per coarse knot span, ``k >= n_levels - 1``."""
+    for f, face in enumerate(model.faces):
+        ratio = np.count_nonzero(model.element_face == f) / np.prod(face.n_elements)
+        if ratio < 4 ** (n_levels - 1):
+            raise ValueError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
+                             f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "
+                             f"the finest of {n_levels} spline levels needs (Eq. 16); use "
+                             "more elements or fewer levels")
 
 
 def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str) -> None:
@@ -106,7 +157,7 @@ def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str)
 
 def is_curved(model: NominalModel) -> bool:
     """True if the nominal surface is not planar (control points off one plane)."""
-    return not is_flat([model.patch])
+    return not is_flat(model.patches)
 
 
 def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None = None
@@ -121,6 +172,10 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
     """
+    if model.is_part:                     # several faces: always the vector formulation
+        _check_part_levels(model, n_levels)
+        return part_space(model.faces, n_levels, model.uv, model.node_face,
+                          node_normals(model.mesh))
     if curved is None:
         curved = is_curved(model)
     normals = node_normals(model.mesh) if curved else None
@@ -151,14 +206,16 @@ def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int =
     Returns the patch and the control values (mm, each control point's displacement along
     its control normal). ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in
     the level's space.
+    For a part of several faces the first is the tuple of every face's measured patch.
     """
     space = solver.space
     q_s = solver.control_values(q, level)
     values = space.control_point_values(q_s, level)
-    patch = space.patch(level)
-    moved = patch.control_points + space.control_vectors(q_s, level).reshape(
-        patch.control_points.shape)
-    return dataclasses.replace(patch, control_points=moved), values
+    faces = space.level_patches(level)
+    d = np.split(space.control_vectors(q_s, level), np.cumsum([f.n_dofs for f in faces])[:-1])
+    moved = tuple(dataclasses.replace(f, control_points=f.control_points + v.reshape(
+        f.control_points.shape)) for f, v in zip(faces, d))
+    return (moved if isinstance(space.patch(level), tuple) else moved[0]), values
 
 
 def measured_spline_std(solver: GeometricRegularization, H, variance: float, level: int) -> np.ndarray:

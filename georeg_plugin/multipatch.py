@@ -154,11 +154,13 @@ def _check_conforming(faces, meshes, offsets, representative, names, tol) -> Non
                     "same knot spans along their shared edge")
 
 
-def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, mesh: PartMesh,
-               node_normals: np.ndarray, glue: bool = True,
+def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarray,
+               node_face: np.ndarray, node_normals: np.ndarray, glue: bool = True,
                rtol: float = RANK_RTOL) -> MultilevelSpace:
     """The spline levels of a part: every face refined dyadically, vector control points
     glued where faces share them (:func:`~georeg_plugin.curved.vector_level`).
+
+    ``uv``, ``node_face``: a :class:`PartMesh`'s; ``node_normals`` (n, 3): the FE unknowns'.
 
     ``MultilevelSpace.patches[k]`` is then the tuple of the faces of level ``k`` (coarse to
     fine); ``space.vector`` holds the control vectors of each level.
@@ -168,9 +170,10 @@ def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, mesh: PartMes
     levels = [list(coarse_faces)]
     for _ in range(int(n_levels) - 1):
         levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
-    rows = [np.flatnonzero(mesh.node_face == k) for k in range(len(levels[0]))]
-    uvs = [mesh.uv[r] for r in rows]
-    n_fe = len(mesh.nodes)
+    node_face = np.asarray(node_face)
+    rows = [np.flatnonzero(node_face == k) for k in range(len(levels[0]))]
+    uvs = [np.asarray(uv)[r] for r in rows]
+    n_fe = len(node_face)
     vector = [vector_level(faces, rows, uvs, node_normals, n_fe, glue, rtol)
               for faces in reversed(levels)]
     if glue:

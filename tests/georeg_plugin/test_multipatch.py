@@ -77,7 +77,7 @@ def test_part_levels_are_nested_glued_and_hold_the_rigid_modes(shape):
     mesh = part_mesh(fine)
     normals = face_normals(mesh, fine) if shape == "folded" else \
         np.vstack([fine[f].normals(mesh.uv[[i]]) for i, f in enumerate(mesh.node_face)])
-    space = part_space(coarse, n_levels, mesh, normals)
+    space = part_space(coarse, n_levels, mesh.uv, mesh.node_face, normals)
     X = mesh.nodes
     rigid = np.column_stack([normals] + [np.einsum("kd,kd->k", normals, np.cross(e, X))
                                          for e in np.eye(3)])
