@@ -11,6 +11,7 @@ approximate), even alone.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -90,7 +91,9 @@ def cad_model(path: Path, faces: Sequence | None, elements: int | None, levels: 
     k = cad_refinements(patches, elements, levels)
     try:
         if len(patches) == 1 and max(patches[0].degrees) <= 2:
-            return nominal_model(patches[0], k, "Q9", name=names[0])
+            model = nominal_model(patches[0], k, "Q9", name=names[0])
+            return dataclasses.replace(model, face_names=names, element_face=np.zeros(
+                model.mesh.n_elements, dtype=int))              # the VTU's `face`, all 0
         return part_model(patches, k, names, "Q9", name=Path(path).stem)
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from err

@@ -123,7 +123,8 @@ def test_cad_inputs_are_checked_naming_the_file_and_the_face(parts, tmp_path):
     # one face picked by name: a one-patch model (flat: the scalar operators)
     config = load_config(_config_file(folder, extra='faces = ["right"]\nelements = 16'))
     model = build_model(config.geometry, 2)
-    assert not model.is_part and model.mesh.n_elements == 16
+    assert not model.is_part and model.mesh.n_elements == 16 and model.face_names == ("right",)
+    assert np.all(model.element_face == 0)
 
 
 def test_a_part_of_several_faces_needs_fixed_levels(parts, tmp_path):
