@@ -132,3 +132,21 @@ def test_a_part_of_several_faces_needs_fixed_levels(parts, tmp_path):
     config = _config_file(folder)
     config.write_text(config.read_text().replace("levels = 2", 'levels = "auto"'))
     assert cli.main(["-q", "measure", str(config), "--out", str(tmp_path / "out")]) == 1
+
+
+def test_compare_measures_the_part_with_every_method(parts, tmp_path):
+    """`georeg compare` on the panel's IGES: every method ok, every VTU with its `face`."""
+    folder, _ = parts["panel"]
+    config = _config_file(folder, extra="elements = 64")
+    config.write_text(config.read_text().replace("scales = 2", "scales = 1\n"
+                                                 "tikhonov_length_mm = [5.0]"))
+    out = tmp_path / "out"
+    assert cli.main(["-q", "compare", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    labels = [m["label"] for m in summary["methods"]]
+    assert labels == ["FE (multiscale)", "Tikhonov 5 mm", "georeg 2 levels (monoscale)"], labels
+    assert not summary["failed_methods"]
+    for m in summary["methods"]:
+        vtu = meshio.read(out / m["mesh_file"])
+        assert np.concatenate(vtu.cell_data["face"]).tolist() == [0] * 64
+    assert len(list(out.glob("*_spline.igs"))) == 1
