@@ -28,7 +28,8 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "is_curved", "measured_spline", "measured_spline_std",
+__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "is_curved",
+           "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
 
@@ -160,14 +161,17 @@ def is_curved(model: NominalModel) -> bool:
     return not is_flat(model.patches)
 
 
-def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None = None
+def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None = False
                         ) -> MultilevelSpace:
     """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
 
-    ``curved``: the vector formulation of :mod:`georeg_plugin.curved` (control vectors
-    seen along the core's node normals: nested levels, rigid motions in range); ``None``
-    (default) chooses it when the nominal surface is not planar (:func:`is_curved`), the
-    scalar ``C^T[I, J] = R_J(xi_I)`` on a flat one (on which both have the same range).
+    ``curved``: True, the vector formulation of :mod:`georeg_plugin.curved` for a shape
+    unknown along the core's node normals (control vectors seen along the normals: nested
+    levels, rigid normal motions in range); False (default), the scalar spline space
+    ``C^T[I, J] = R_J(xi_I)`` (e.g. each component of a displacement); None chooses the
+    vector formulation when the nominal surface is not planar (:func:`is_curved`), the
+    scalar one on a flat one (on which both have the same range). A part of several faces
+    always gets the vector formulation.
     For a mesh made from the spline (``model.uv``) the
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
@@ -193,7 +197,8 @@ def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int
 
     By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
     the paper's section 3.3), clipped to the coarsest level. ``curved``: see
-    :func:`multilevel_for_mesh`.
+    :func:`multilevel_for_mesh`; by default (None) the shape's formulation follows the
+    nominal (vector when it is not planar).
     """
     return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
 

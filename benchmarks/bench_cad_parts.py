@@ -64,8 +64,8 @@ def operators_table() -> None:
         first = [extraction_operator(p, mesh.uv, n).toarray() for p in reversed(space.patches)]
         for label, ops in (("vector (curved.py)", vector), ("R_J (n_I . n_J)", first)):
             bases = [np.linalg.qr(C.T)[0] for C in ops]
-            nest = max(np.abs(ops[s + 1].T - Q @ (Q.T @ ops[s + 1].T)).max() / np.abs(ops[s + 1]).max()
-                       for s, Q in enumerate(bases[:-1]))
+            nest = max(np.abs(ops[s + 1].T - Q @ (Q.T @ ops[s + 1].T)).max()
+                       / np.abs(ops[s + 1]).max() for s, Q in enumerate(bases[:-1]))
             out = max(np.abs(rigid - Q @ (Q.T @ rigid)).max() / np.abs(rigid).max() for Q in bases)
             print(f"| {name} | {label} | {[C.shape[0] for C in ops]} | {nest:.1e} | {out:.1e} |")
 
@@ -95,8 +95,9 @@ def parts_table(elements: int) -> None:
             run = run_methods(config, specs, images=scene.images,
                               truth=Truth(scene.specimen, scene.cameras))
             for r in run.results:
-                row.append(f"{rms(bounded_shape_error(r.measurement.nodes, scene.specimen)) * 1e3:.2f}"
-                           if r.measurement is not None else "failed")
+                error = None if r.measurement is None else \
+                    rms(bounded_shape_error(r.measurement.nodes, scene.specimen))
+                row.append("failed" if error is None else f"{error * 1e3:.2f}")
             mesh = run.results[0].mesh
         print(f"| {part} ({mesh.n_elements} Q9) | " + " | ".join(row) + " |")
 

@@ -85,7 +85,8 @@ def cad_refinements(faces: Sequence, elements: int | None, levels: int) -> int:
     return max(levels - 1, math.ceil(math.log(max(target / coarse, 1.0), 4) - 1e-9))
 
 
-def cad_model(path: Path, faces: Sequence | None, elements: int | None, levels: int) -> NominalModel:
+def cad_model(path: Path, faces: Sequence | None, elements: int | None,
+              levels: int) -> NominalModel:
     """The nominal model of ``[geometry] kind = "cad"`` (see the module docstring)."""
     patches, names = cad_faces(path, faces)
     k = cad_refinements(patches, elements, levels)

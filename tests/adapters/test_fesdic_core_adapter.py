@@ -99,13 +99,14 @@ def test_the_formulation_follows_the_nominal_flat_scalar_curved_vector():
     from fesdic_core.mesh import node_normals
     from georeg_plugin.geometries import cylinder
     flat = nominal_model(plate_with_hole(L, W, 10.0), 2, "Q9")
-    space = multilevel_for_mesh(flat, 2)
+    space = multilevel_for_mesh(flat, 2, curved=None)
     reference = multilevel_space(flat.patch, 2, flat.mesh.nodes, uv=flat.uv, family="Q9")
     assert not is_curved(flat) and not space.vector
     for C, R in zip(space.operators, reference.operators):
         assert (C != R).nnz == 0
     panel = nominal_model(cylinder(100.0, 40.0, 30.0), 3, "Q9")
-    space = multilevel_for_mesh(panel, 3)
+    space = multilevel_for_mesh(panel, 3, curved=None)
+    assert not multilevel_for_mesh(panel, 3).vector     # default: the scalar space
     assert is_curved(panel) and space.vector
     n, X = node_normals(panel.mesh), panel.mesh.nodes
     rigid = np.column_stack([n] + [np.einsum("kd,kd->k", n, np.cross(e, X)) for e in np.eye(3)])

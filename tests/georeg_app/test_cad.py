@@ -12,7 +12,6 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.rig import write_cameras_json
 from georeg_app import cli
 from georeg_app.config import (CamerasConfig, Config, ConfigError, GeometryConfig, ImagesConfig,
                                MethodConfig, OutputConfig, load_config)
@@ -71,7 +70,8 @@ def test_georeg_measures_the_cad_part_within_5_um_and_beats_fe_and_tikhonov(part
     scales = (1, 0)
     specs = [MethodSpec("fe", None, scales, "FE"), tikhonov_spec(5.0, scales),
              tikhonov_spec("auto", scales), georeg_spec(2, scales)]
-    run = run_methods(config, specs, images=scene.images, truth=Truth(scene.specimen, scene.cameras))
+    truth = Truth(scene.specimen, scene.cameras)
+    run = run_methods(config, specs, images=scene.images, truth=truth)
     errors = {}
     for r in run.results:
         assert r.ok, (r.spec.label, r.failure)
