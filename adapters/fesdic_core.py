@@ -18,7 +18,9 @@ import numpy as np
 
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
+from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
+from georeg_plugin.multipatch import part_mesh, part_space
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
@@ -26,7 +28,8 @@ from georeg_plugin.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "georeg_solver", "measured_spline", "measured_spline_std",
+__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "is_curved",
+           "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
 
@@ -36,14 +39,35 @@ class NominalModel:
 
     Attributes
     ----------
-    patch : the coarsest spline of the nominal geometry (the CAD model).
+    patch : the coarsest spline of the nominal geometry (the CAD model); for a part of
+        several faces, its first face.
     mesh : the analysis-suitable FE mesh of the core (Eq. 17).
-    uv : (n, 2) parameters of the FE nodes on ``patch`` (None for a legacy mesh).
+    uv : (n, 2) parameters of the FE nodes on ``patch`` (None for a legacy mesh); for a
+        part, on the face ``node_face`` of each node.
+    faces : the coarsest splines of every face of a part (:func:`part_model`), or empty
+        (one patch: ``patch``).
+    node_face : (n,) face of each node's ``uv`` (parts only).
+    element_face : (n_elements,) face of each element (parts only; the VTU's ``face``).
+    face_names : one name per face (parts only).
     """
 
     patch: SplinePatch
     mesh: SurfaceMesh
     uv: np.ndarray | None
+    faces: tuple = ()
+    node_face: np.ndarray | None = None
+    element_face: np.ndarray | None = None
+    face_names: tuple = ()
+
+    @property
+    def patches(self) -> tuple:
+        """Every face's coarsest spline (``(patch,)`` for a one-patch model)."""
+        return tuple(self.faces) if self.faces else (self.patch,)
+
+    @property
+    def is_part(self) -> bool:
+        """True for a part of several faces (:func:`part_model`)."""
+        return bool(self.faces)
 
 
 def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: str = "Q9",
@@ -75,6 +99,35 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
                         uv=fe.uv)
 
 
+def part_model(faces, refinements: int, names=None, family: str = "Q9",
+               name: str = "part") -> NominalModel:
+    """FE mesh of a part of several faces (:func:`georeg_plugin.multipatch.part_mesh`):
+    every face refined ``refinements`` times dyadically, welded along shared edges.
+
+    Raises :class:`~georeg_plugin.multipatch.NonConformingFacesError` naming two faces whose
+    shared edge's nodes do not coincide."""
+    faces = tuple(faces)
+    fine = [refine_uniform(f, int(refinements))[0] for f in faces]
+    part = part_mesh(fine, names, family)
+    block = CellBlock(family=family_from_meshio(part.cell_type), connectivity=part.connectivity)
+    return NominalModel(patch=faces[0], mesh=SurfaceMesh(nodes=part.nodes, blocks=(block,),
+                                                         name=name),
+                        uv=part.uv, faces=faces, node_face=part.node_face,
+                        element_face=part.element_face, face_names=part.face_names)
+
+
+def _check_part_levels(model: NominalModel, n_levels: int) -> None:
+    """Each face's FE elements must refine its finest spline level (Eq. 16): a mesh of
+    :func:`part_model` has ``4^k`` elements per coarse knot span, ``k >= n_levels - 1``."""
+    for f, face in enumerate(model.faces):
+        ratio = np.count_nonzero(model.element_face == f) / np.prod(face.n_elements)
+        if ratio < 4 ** (n_levels - 1):
+            raise ValueError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
+                             f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "
+                             f"the finest of {n_levels} spline levels needs (Eq. 16); use "
+                             "more elements or fewer levels")
+
+
 def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str) -> None:
     """Raise ValueError if an FE element of ``model`` straddles a knot of ``finest``.
 
@@ -103,14 +156,32 @@ def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str)
                     "spans, or fewer levels")
 
 
-def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False) -> MultilevelSpace:
+def is_curved(model: NominalModel) -> bool:
+    """True if the nominal surface is not planar (control points off one plane)."""
+    return not is_flat(model.patches)
+
+
+def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None = False
+                        ) -> MultilevelSpace:
     """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
 
-    ``curved`` weights ``C^T[I, J]`` by ``n_I . n_J`` (normals from the core), for nominal
-    surfaces that are not planar. For a mesh made from the spline (``model.uv``) the
+    ``curved``: True, the vector formulation of :mod:`georeg_plugin.curved` for a shape
+    unknown along the core's node normals (control vectors seen along the normals: nested
+    levels, rigid normal motions in range); False (default), the scalar spline space
+    ``C^T[I, J] = R_J(xi_I)`` (e.g. each component of a displacement); None chooses the
+    vector formulation when the nominal surface is not planar (:func:`is_curved`), the
+    scalar one on a flat one (on which both have the same range). A part of several faces
+    always gets the vector formulation.
+    For a mesh made from the spline (``model.uv``) the
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
     """
+    if model.is_part:                     # several faces: always the vector formulation
+        _check_part_levels(model, n_levels)
+        return part_space(model.faces, n_levels, model.uv, model.node_face,
+                          node_normals(model.mesh))
+    if curved is None:
+        curved = is_curved(model)
     normals = node_normals(model.mesh) if curved else None
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
     space = multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
@@ -121,29 +192,35 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool = False
 
 
 def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,
-                  curved: bool = False) -> GeometricRegularization:
+                  curved: bool | None = None) -> GeometricRegularization:
     """The plugin's solve hook for the core: level ``schedule[scale]`` at each image scale.
 
     By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
-    the paper's section 3.3), clipped to the coarsest level.
+    the paper's section 3.3), clipped to the coarsest level. ``curved``: see
+    :func:`multilevel_for_mesh`; by default (None) the shape's formulation follows the
+    nominal (vector when it is not planar).
     """
     return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
 
 
 def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int = 0
                     ) -> tuple[SplinePatch, np.ndarray]:
-    """The measured shape as a spline of ``level`` (Eq. 21): control points moved along normals.
+    """The measured shape as a spline of ``level`` (Eq. 21): control points moved along
+    normals (flat nominal) or by the vector formulation's control vectors (curved).
 
-    Returns the patch and the control values ``q_s`` (mm along each control normal).
-    ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in the level's space.
+    Returns the patch and the control values (mm, each control point's displacement along
+    its control normal). ``C_s^T q_s`` reproduces ``q`` at the FE nodes when ``q`` lies in
+    the level's space.
+    For a part of several faces the first is the tuple of every face's measured patch.
     """
     space = solver.space
     q_s = solver.control_values(q, level)
     values = space.control_point_values(q_s, level)
-    patch = space.patch(level)
-    moved = patch.control_points + values.reshape(patch.control_points.shape[:2])[..., None] \
-        * patch.control_normals().reshape(patch.control_points.shape)
-    return dataclasses.replace(patch, control_points=moved), values
+    faces = space.level_patches(level)
+    d = np.split(space.control_vectors(q_s, level), np.cumsum([f.n_dofs for f in faces])[:-1])
+    moved = tuple(dataclasses.replace(f, control_points=f.control_points + v.reshape(
+        f.control_points.shape)) for f, v in zip(faces, d))
+    return (moved if isinstance(space.patch(level), tuple) else moved[0]), values
 
 
 def measured_spline_std(solver: GeometricRegularization, H, variance: float, level: int) -> np.ndarray:
@@ -153,5 +230,11 @@ def measured_spline_std(solver: GeometricRegularization, H, variance: float, lev
     rigid modes). One value per control point, as :func:`measured_spline`'s values."""
     space = solver.space
     H_s, _ = solver.project(H, np.zeros(space.n_fe), level)
-    variance_s = variance * np.diag(np.linalg.inv(H_s.toarray()))
+    inverse = np.linalg.inv(H_s.toarray())
+    if space.vector:                    # d_J . n_J = t_J^T q_s: variance t_J^T H_s^-1 t_J
+        normals = np.vstack([p.control_normals() for p in space.level_patches(level)])
+        T = space.vector[level].coefficients.reshape(len(normals), 3, -1)
+        t = np.einsum("jkr,jk->jr", T, normals)
+        return np.sqrt(np.clip(variance * np.einsum("jr,rs,js->j", t, inverse, t), 0.0, None))
+    variance_s = variance * np.diag(inverse)
     return np.sqrt(np.clip(space.control_point_values(variance_s, level), 0.0, None))

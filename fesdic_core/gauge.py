@@ -22,6 +22,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+#: relative singular value (rotations times the surface radius) below which a rigid motion
+#: slides the surface in itself. An exact slide (rotation of a cylinder about its axis) is
+#: seen through the FE node normals' error: 3e-4 (R 30 mm), 3e-5 / 7e-6 (R 100 mm, 8 / 16
+#: Q9 elements) on a 40 mm wide panel; a genuine mode scales as width / R (0.33, 0.09,
+#: 0.009 at R 1000 mm). Exact slides of a plane are ~1e-16.
+TANGENTIAL_RTOL = 1e-3
+
 
 def rigid_normal_modes(nodes: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Normal components of the 6 rigid motions at the nodes, (n, 6), and the centre used."""
@@ -58,10 +65,20 @@ def split_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
     """Weighted least-squares rigid part of ``q``: returns ``(q_rigid, [t, w], centre)``.
 
     ``node_weights`` (n,) >= 0, e.g. :func:`fesdic_core.mesh.nodal_areas`.
+
+    The rigid motions that slide the surface in itself (:func:`tangential_motions`, same
+    scaling and tolerance) get no part: on a cylinder panel the rotation about its own axis
+    is nearly invisible in the normal modes of a Q9 mesh (its FE normals are not exactly
+    radial), and a least-squares coefficient along it would move the cameras by tens of
+    pixels for nothing.
     """
     modes, centre = rigid_normal_modes(nodes, normals)
-    sw = np.sqrt(checked_weights(node_weights, len(nodes)))
-    coef, *_ = np.linalg.lstsq(modes * sw[:, None], q * sw, rcond=1e-10)
+    w = checked_weights(node_weights, len(nodes))
+    sw = np.sqrt(w)
+    radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=w)))
+    scale = np.r_[np.ones(3), np.full(3, radius)]                # mm and radians * radius
+    coef, *_ = np.linalg.lstsq(modes / scale * sw[:, None], q * sw, rcond=TANGENTIAL_RTOL)
+    coef = coef / scale
     return modes @ coef, coef, centre
 
 
@@ -91,12 +108,13 @@ def transfer_rigid_part(q: np.ndarray, nodes: np.ndarray, normals: np.ndarray,
 
 
 def tangential_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray,
-                       rtol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+                       rtol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Rigid motions ``[t, w]`` (6, k) that slide the surface in itself, and the centre.
 
     They are the (near) null space of the rigid normal modes: no node moves along its
     normal, so the gray levels cannot see them (k = 3 on a plane, 2 on a cylinder).
     """
+    rtol = TANGENTIAL_RTOL if rtol is None else rtol
     node_weights = checked_weights(node_weights, len(nodes))
     modes, centre = rigid_normal_modes(nodes, normals)
     # metres and radians on a comparable footing: rotations times the surface radius

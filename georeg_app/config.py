@@ -26,11 +26,14 @@ A complete example (every key; optional keys show their default in parentheses):
     # cam1_px = [640.1, 1032.5]      # where camera 1 sees it
 
     [geometry]                    # required: the nominal surface
-    kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh"
+    kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh" | "cad"
     length_mm = 100.0             # along x; rectangle and plate_with_hole
     width_mm = 50.0               # along y; rectangle and plate_with_hole
     hole_radius_mm = 14.0         # plate_with_hole only (0 < r < width/2)
-    # file = "specimen.msh"       # kind = "mesh" only: any surface mesh meshio reads
+    # file = "specimen.msh"       # kind = "mesh": any surface mesh meshio reads;
+                                  # kind = "cad": the part's IGES file (.igs, .iges:
+                                  # untrimmed B-spline faces, entity 128)
+    # faces = [0, "lid"]          # kind = "cad" only: faces by index or name (default all)
     elements = 400                # approximate number of FE elements (default: chosen by the method)
                                   # (plates are centred at the world origin in the z = 0 plane)
 
@@ -94,7 +97,7 @@ def lengths_or_auto(value: Any) -> tuple:
     if not values:
         raise ValueError
     return tuple(v if v == AUTO else number(v) for v in values)
-GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh")
+GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh", "cad")
 NORMALISATIONS = ("element", "global", "none")
 DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0, "auto")
 DEFAULT_OUTPUT_DIR = "georeg_out"
@@ -146,6 +149,7 @@ class GeometryConfig:
     hole_radius_mm: float | None = None
     file: Path | None = None
     elements: int | None = None
+    faces: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -240,7 +244,7 @@ def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> Cameras
 
 _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
                   "plate_with_hole": {"length_mm", "width_mm", "hole_radius_mm"},
-                  "mesh": {"file"}}
+                  "mesh": {"file"}, "cad": {"file"}}
 
 
 def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
@@ -255,7 +259,10 @@ def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
               "hole_radius_mm": t.take("hole_radius_mm", number, "a number (mm)"),
               "file": t.take("file", string, "a file path (string)")}
     elements = t.take("elements", integer, "an integer")
+    faces = t.take("faces", _face_list, "a list of face indices (integers) or names (strings)")
     t.finish()
+    if faces is not None and kind != "cad":
+        raise t.error("faces", f"not used with kind = {json.dumps(kind)}; remove it")
     for key in sorted(_GEOMETRY_KEYS[kind] - given):
         raise t.error(key, f"missing required key (for kind = {json.dumps(kind)})")
     for key in sorted((given & set(values)) - _GEOMETRY_KEYS[kind]):
@@ -266,8 +273,27 @@ def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
     check(t, "hole_radius_mm", radius, radius is not None and width is not None
            and 0 < radius < 0.5 * width, f"> 0 and < width_mm / 2 = {0.5 * (width or 0):g}")
     check(t, "elements", elements, elements is not None and elements >= 1, ">= 1")
-    return GeometryConfig(kind, length, width, radius,
-                          existing_file(t, "file", values["file"], base), elements)
+    if kind == "cad":
+        from .cad import cad_faces, check_cad_file
+        try:
+            check_cad_file(Path(values["file"]))  # STEP: named before looking for the file
+        except ValueError as err:
+            raise t.error("file", str(err)) from None
+    path = existing_file(t, "file", values["file"], base)
+    if kind == "cad":
+        for key, selection in (("file", None), ("faces", faces)):
+            try:
+                cad_faces(path, selection)        # the file reads, the faces exist
+            except ValueError as err:
+                raise t.error(key, str(err)) from None
+    return GeometryConfig(kind, length, width, radius, path, elements, faces)
+
+
+def _face_list(value: Any) -> tuple:
+    if not isinstance(value, list) or not value or not all(
+            isinstance(v, str) or (isinstance(v, int) and not isinstance(v, bool)) for v in value):
+        raise TypeError(value)
+    return tuple(value)
 
 
 def _method(data: Any, source: Path) -> MethodConfig:

@@ -268,7 +268,8 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
     ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
     known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
-    ``shape_bias_mm`` (the bias indicator)."""
+    ``shape_bias_mm`` (the bias indicator); for a part of several faces the cell data
+    ``face`` (each element's face index)."""
     from fesdic_core.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
@@ -280,7 +281,9 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     for name in ("shape_std_mm", "shape_bias_mm"):
         if getattr(m, name, None) is not None:
             point_data[name] = np.asarray(getattr(m, name), float)
-    write_mesh(path, mesh, point_data=point_data)
+    face = getattr(result, "element_face", None)               # a part of several faces
+    cell_data = None if face is None else {"face": np.asarray(face, dtype=np.int32)}
+    write_mesh(path, mesh, point_data=point_data, cell_data=cell_data)
     return Path(path)
 
 
@@ -311,9 +314,19 @@ def write_convergence_csv(path: str | os.PathLike, run) -> Path:
 
 
 def write_spline_outputs(json_path: str | os.PathLike, iges_path: str | os.PathLike, result) -> None:
-    """The measured spline of a georeg result as JSON (with the control values q_s) and IGES."""
-    from georeg_plugin.spline_io import write_iges, write_spline_json
+    """The measured spline of a georeg result as JSON (with the control values q_s) and IGES;
+    a part's faces as one JSON of faces and one IGES entity 128 per face."""
+    from georeg_plugin.spline_io import write_iges, write_part_json, write_spline_json
     patch, values = result.spline, result.spline_values
+    if isinstance(patch, tuple):
+        sizes = np.cumsum([p.n_dofs for p in patch])[:-1]
+        std = getattr(result, "spline_std", None)
+        fields = None if values is None else np.split(np.asarray(values), sizes)
+        stds = None if std is None or values is None else np.split(np.asarray(std), sizes)
+        names = getattr(result, "face_names", None) or [f"face{k}" for k in range(len(patch))]
+        write_part_json(json_path, patch, names, fields, stds)
+        write_iges(iges_path, list(patch), names=list(names))
+        return
     n_ctrl = int(np.prod(patch.control_points.shape[:2]))
     if values is not None and np.size(values) != n_ctrl:
         logger.warning("%s: %d control values for %d control points; not written",

@@ -42,6 +42,7 @@ from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements
 
 from . import installed_version
+from .cad import cad_faces, cad_model, cad_refinements
 from .config import (AUTO, CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
                      OutputConfig)
 from .methods import MethodSpec, default_specs  # noqa: F401 (the pipeline's contract)
@@ -61,7 +62,9 @@ class MethodResult:
     ``shape_error_mm``: per-node distance to the true surface after the best rigid
     alignment (None without a truth). ``level_search``: the record of georeg's automatic
     level choice; ``spline_std``: the standard deviation of the measured spline's control
-    values (mm); ``regularization``: what the method chose (Tikhonov lengths per scale)."""
+    values (mm); ``regularization``: what the method chose (Tikhonov lengths per scale).
+    A part of several faces (``[geometry] kind = "cad"``): ``spline`` is a tuple of patches
+    (one per face), ``element_face`` each element's face, ``face_names`` their names."""
 
     spec: MethodSpec
     measurement: Measurement | None
@@ -76,6 +79,8 @@ class MethodResult:
     level_search: LevelSearch | None = None
     spline_std: np.ndarray | None = None
     regularization: dict | None = None
+    element_face: np.ndarray | None = None
+    face_names: tuple = ()
 
     @property
     def ok(self) -> bool:
@@ -145,11 +150,16 @@ def coarse_patch(geometry: GeometryConfig) -> SplinePatch:
 MIN_PX_PER_ELEMENT = 16     # pixels an FE element needs at full resolution (9 Q9 nodes)
 
 
+def _coarse_faces(geometry: GeometryConfig) -> tuple:
+    """The coarsest splines: the CAD's selected faces, or the plate's one patch."""
+    if geometry.kind == "cad":
+        return cad_faces(geometry.file, geometry.faces)[0]
+    return (coarse_patch(geometry),)
+
+
 def _refinements(geometry: GeometryConfig, levels: int) -> int:
     """Dyadic refinements from the coarsest spline to the FE mesh (see :func:`build_model`)."""
-    patch = coarse_patch(geometry)
-    target = geometry.elements or 1000
-    return max(levels - 1, math.ceil(math.log(target / np.prod(patch.n_elements), 4) - 1e-9))
+    return cad_refinements(_coarse_faces(geometry), geometry.elements, levels)
 
 
 def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
@@ -168,6 +178,8 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
         size = hi - lo
         patch = rectangle(size[0], size[1], center=tuple((lo + hi)[:2] / 2))
         return NominalModel(patch=patch, mesh=mesh, uv=None)       # point inversion (Remark 6)
+    if geometry.kind == "cad":
+        return cad_model(geometry.file, geometry.faces, geometry.elements, levels)
     return nominal_model(coarse_patch(geometry), _refinements(geometry, levels), "Q9",
                          name=geometry.kind)
 
@@ -209,7 +221,7 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
     if config.geometry.kind == "mesh":
         return
     levels = config.method.fixed_levels
-    coarse = int(np.prod(coarse_patch(config.geometry).n_elements))
+    coarse = sum(int(np.prod(f.n_elements)) for f in _coarse_faces(config.geometry))
     asked = config.geometry.elements
     if asked is not None and coarse * 4 ** (levels - 1) > 2 * asked:
         raise ValueError(
@@ -229,11 +241,11 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
 def check_levels(model: NominalModel, levels: int, geometry: GeometryConfig) -> None:
     """Refuse spline levels whose finest one has more dofs than the FE mesh has nodes
     (the projection ``C H C^T`` would be singular, and the operators needlessly large)."""
-    (n_u, n_v), (p_u, p_v) = model.patch.n_elements, model.patch.degrees
     k = 2 ** (levels - 1)
-    dofs = (n_u * k + p_u) * (n_v * k + p_v)
+    dofs = sum((p.n_elements[0] * k + p.degrees[0]) * (p.n_elements[1] * k + p.degrees[1])
+               for p in model.patches)
     if dofs > model.mesh.n_nodes:
-        where = f"[geometry] file = {geometry.file}" if geometry.kind == "mesh" else "[geometry]"
+        where = f"[geometry] file = {geometry.file}" if geometry.file else "[geometry]"
         raise ValueError(f"[method] levels = {levels}: the finest spline level would have {dofs} "
                          f"dofs for the {model.mesh.n_nodes} nodes of the FE mesh ({where}); "
                          "use fewer levels or a finer mesh")
@@ -303,7 +315,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
                         status="ok" if m.ok else "failed", failure=m.failure,
                         shape_error_mm=errors, level_search=search, spline_std=spline_std,
                         regularization={"tikhonov_length_mm": {int(k): float(v) for k, v in
-                                                               chosen.items()}} if chosen else None)
+                                                               chosen.items()}} if chosen else None,
+                        element_face=model.element_face, face_names=model.face_names)
 
 
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
@@ -331,6 +344,9 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     method = config.method
     model = build_model(config.geometry, method.fixed_levels)
     check_levels(model, method.fixed_levels, config.geometry)
+    if model.is_part and any(spec.levels == AUTO for spec in specs):
+        raise ValueError('[method] levels = "auto": the level search takes one patch; a part '
+                         f"of {len(model.faces)} faces needs a number of levels")
     logger.info("nominal model: %s, %d Q9 nodes, %d elements", config.geometry.kind,
                 model.mesh.n_nodes, model.mesh.n_elements)
     results = []

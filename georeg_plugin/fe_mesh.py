@@ -148,13 +148,18 @@ def coincident_groups(points: np.ndarray, tol: float) -> np.ndarray:
     return representative
 
 
-def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9", weld: bool = True) -> SplineFEMesh:
+def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9", weld: bool = True,
+                        exact: bool = True) -> SplineFEMesh:
     """FE mesh with one element per Bezier element of ``patch``, nodes on the spline.
 
     Parameters
     ----------
     patch : SplinePatch (usually refined by knot insertion to the FE resolution).
     family : "Q9" (nodes at the Lagrange points, Eq. 17) or "Q4" (span corners).
+    exact : refuse a degree above the element degree (Eq. 16). ``False`` places the nodes on
+        the surface at the same parametric positions all the same (e.g. a bicubic CAD
+        face): the elements then interpolate the spline between the nodes, Eq. 16 holds
+        only approximately (the operators only need ``R_J(xi_I)`` at the nodes).
 
     Returns
     -------
@@ -169,7 +174,8 @@ def fe_mesh_from_spline(patch: SplinePatch, family: str = "Q9", weld: bool = Tru
     """
     if family not in _FAMILIES:
         raise ValueError(f"family must be one of {sorted(_FAMILIES)}, got {family!r}")
-    check_element_degree(patch.degrees, family)
+    if exact:
+        check_element_degree(patch.degrees, family)
     cell_type, per_span, local = _FAMILIES[family]
     gu, gv = (_parametric_grid(b, per_span) for b in patch.breaks)  # non-empty spans
     n_cols = gv.size

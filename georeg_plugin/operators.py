@@ -22,8 +22,12 @@ evaluated at the parametric coordinates ``xi_I`` of FE node ``I``:
   Eq. 16 is not claimed: ``C^T q_s`` is the spline field at the nodes only, and the FE
   field interpolates it between them (any element family, any spline degree).
 * Curved surface: the FE unknown of node ``I`` is a displacement along its normal
-  ``n_I`` (Remark 1); spline dof ``J`` moves its control point along its own normal
-  ``n_J``, hence ``C^T[I, J] = R_J(xi_I) (n_I . n_J)``. On a flat plate ``n_I . n_J = 1``.
+  ``n_I`` (Remark 1). ``multilevel_space`` / ``nested_space`` given the node normals use
+  the vector formulation of :mod:`georeg_plugin.curved` (control VECTORS seen along
+  ``n_I``: nested levels, rigid motions in range). ``extraction_operator`` with normals
+  still gives the first formula tried, ``C^T[I, J] = R_J(xi_I) (n_I . n_J)`` (a dof
+  moving its control point along its own normal ``n_J``), kept for comparison only:
+  it breaks the nesting (Eq. 13) on a cylinder.
 """
 from __future__ import annotations
 
@@ -35,6 +39,7 @@ from typing import Sequence
 import numpy as np
 import scipy.sparse as sps
 
+from .curved import vector_level
 from .fe_mesh import check_element_degree, coincident_groups
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
@@ -140,12 +145,16 @@ class MultilevelSpace:
         numbering as ``operators``), or empty: the dofs of a closed patch glue its
         coincident control points (``C_s = G_s C_s^patch``); the values of the control
         points of level ``s`` are ``G_s^T q_s``.
+    vector : tuple of :class:`~georeg_plugin.curved.VectorLevel`, one per level (same
+        numbering as ``operators``), or empty: a curved part's levels move their control
+        points by vectors (``operators[s]`` is then an orthonormal basis of the range).
     """
 
     patches: tuple
     operators: tuple
     refinement: tuple = ()
     gluing: tuple = ()
+    vector: tuple = ()
 
     def __post_init__(self) -> None:
         ops = tuple(sps.csr_matrix(C) for C in self.operators)
@@ -186,8 +195,27 @@ class MultilevelSpace:
         return self.patches[-1 - level]
 
     def control_point_values(self, q_s: np.ndarray, level: int) -> np.ndarray:
-        """Values (n_control_points,) of the level's control points from its dofs ``q_s``."""
+        """Values (n_control_points,) of the level's control points from its dofs ``q_s``:
+        the scalar dofs, or in the vector formulation the control vector along the
+        control normal ``d_J . n_J``."""
+        if self.vector:
+            d = self.control_vectors(q_s, level)
+            normals = np.vstack([p.control_normals() for p in self.level_patches(level)])
+            return np.einsum("kd,kd->k", d, normals)
         return q_s if not self.gluing else self.gluing[level].T @ q_s
+
+    def control_vectors(self, q_s: np.ndarray, level: int) -> np.ndarray:
+        """Control point displacements (n_control_points, 3) of the level's dofs ``q_s``:
+        the vector formulation's ``d``, else the scalar values along the control normals."""
+        if self.vector:
+            return self.vector[level].control_vectors(q_s)
+        normals = self.patch(level).control_normals()
+        return self.control_point_values(q_s, level)[:, None] * normals
+
+    def level_patches(self, level: int) -> tuple:
+        """The patches (faces) of a level (``0`` = finest): one unless the part has faces."""
+        p = self.patch(level)
+        return tuple(p) if isinstance(p, (tuple, list)) else (p,)
 
 
 def gluing_matrix(patch: SplinePatch, tol: float = 1e-9) -> sps.csr_matrix:
@@ -215,7 +243,8 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     coarse_patch : the coarsest spline (level ``n_levels - 1``).
     n_levels : number of levels; each finer one halves every knot span.
     nodes : (n_fe, 3) FE node coordinates, mm (used for point inversion if ``uv`` is None).
-    node_normals : (n_fe, 3), optional (curved surfaces, see ``extraction_operator``).
+    node_normals : (n_fe, 3), optional: curved surfaces, the vector formulation of
+        :mod:`georeg_plugin.curved` (control vectors seen along the node normals).
     uv : (n_fe, 2) parameters of the nodes if known (mesh made from the spline).
     family : element family ("Q9", "Q4", ...) of a mesh made from the spline; the exact
         extraction (Eq. 16) it stands for needs every degree of ``coarse_patch`` <= the
@@ -225,7 +254,8 @@ def multilevel_space(coarse_patch: SplinePatch, n_levels: int, nodes: np.ndarray
     Returns
     -------
     MultilevelSpace. Without normals, ``C_s`` equals the product form of Eq. 28
-    (``C_{s+1} = C_r C_s``) to round-off, for B-splines and NURBS alike. With ``glue``,
+    (``C_{s+1} = C_r C_s``) to round-off, for B-splines and NURBS alike; with normals
+    the ranges of the ``C_s^T`` are nested (``C_s`` is then dense). With ``glue``,
     coincident control points (the seam of a closed patch) share one dof per level; the
     glued levels stay nested (boundary dofs refine one to one).
     """
@@ -261,6 +291,16 @@ def nested_space(patches: Sequence[SplinePatch], refinements: Sequence, nodes: n
     refinements = [sps.csr_matrix(C_r) for C_r in refinements]
     if uv is None:
         uv, _ = node_parameters(patches[-1], nodes)
+    if node_normals is not None:                                  # curved: vector formulation
+        n_fe = np.asarray(uv).shape[0]
+        every = [np.arange(n_fe)]
+        levels = [vector_level([p], every, [uv], node_normals, n_fe, glue)
+                  for p in reversed(patches)]
+        logger.info("multilevel space (vector): %d levels, ranks %s of %s, %d FE nodes",
+                    len(patches), [lv.operator.shape[0] for lv in levels],
+                    [3 * p.n_dofs for p in reversed(patches)], n_fe)
+        return MultilevelSpace(patches=tuple(patches),
+                               operators=tuple(lv.operator for lv in levels), vector=tuple(levels))
     operators = [extraction_operator(p, uv, node_normals) for p in reversed(patches)]
     gluing = [gluing_matrix(p) for p in reversed(patches)] if glue else []
     if gluing and all(G.shape[0] == G.shape[1] for G in gluing):

@@ -38,7 +38,8 @@ from .patch import SplinePatch
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["write_spline_json", "read_spline_json", "read_scalar_field",
+__all__ = ["write_spline_json", "read_spline_json", "read_scalar_field", "write_part_json",
+           "read_part_json",
            "write_iges", "read_iges"]
 
 FORMAT = "georeg-spline"
@@ -75,6 +76,26 @@ def _weights_or_none(patch: SplinePatch) -> np.ndarray | None:
 
 
 # --------------------------------------------------------------------------- JSON
+def _patch_doc(patch: SplinePatch, scalar_field=None, scalar_field_std=None,
+               where: str = "") -> dict:
+    """The JSON fields of one patch (layout in the module docstring)."""
+    cp = np.asarray(patch.control_points, dtype=float)
+    nu, nv = cp.shape[:2]
+    w = _weights_or_none(patch)
+    doc = {"degrees": [int(d) for d in patch.degrees],
+           "knots": [np.asarray(k, dtype=float).tolist() for k in patch.knots],
+           "control_points": cp.tolist(),
+           "weights": None if w is None else w.tolist()}
+    for name, field in (("scalar_field", scalar_field), ("scalar_field_std", scalar_field_std)):
+        if field is not None:
+            f = np.asarray(field, dtype=float)
+            if f.size != nu * nv:
+                raise ValueError(f"{where}{name} has {f.size} values, the patch has "
+                                 f"{nu} x {nv} control points")
+            doc[name] = f.reshape(nu, nv).tolist()
+    return doc
+
+
 def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
                       scalar_field: np.ndarray | None = None,
                       scalar_field_std: np.ndarray | None = None) -> None:
@@ -87,23 +108,37 @@ def write_spline_json(path: str | os.PathLike, patch: SplinePatch,
     scalar_field : (nu, nv) or (nu * nv,), optional, e.g. the measured control values q_s.
     scalar_field_std : same shape, optional: the standard deviation of ``scalar_field``.
     """
-    cp = np.asarray(patch.control_points, dtype=float)
-    nu, nv = cp.shape[:2]
-    w = _weights_or_none(patch)
     doc = {"format": FORMAT, "version": VERSION,
-           "degrees": [int(d) for d in patch.degrees],
-           "knots": [np.asarray(k, dtype=float).tolist() for k in patch.knots],
-           "control_points": cp.tolist(),
-           "weights": None if w is None else w.tolist()}
-    for name, field in (("scalar_field", scalar_field), ("scalar_field_std", scalar_field_std)):
-        if field is not None:
-            f = np.asarray(field, dtype=float)
-            if f.size != nu * nv:
-                raise ValueError(f"{name} has {f.size} values, the patch has "
-                                 f"{nu} x {nv} control points")
-            doc[name] = f.reshape(nu, nv).tolist()
+           **_patch_doc(patch, scalar_field, scalar_field_std)}
     _atomic_write_text(pathlib.Path(path), json.dumps(doc, indent=1) + "\n")
-    logger.info("wrote spline %s (%d x %d control points)", path, nu, nv)
+    logger.info("wrote spline %s (%d x %d control points)", path, *patch.control_points.shape[:2])
+
+
+def write_part_json(path: str | os.PathLike, patches, names=None, scalar_fields=None,
+                    scalar_field_stds=None) -> None:
+    """Write the faces of a part as one JSON file, atomically: ``{"format", "version",
+    "faces": [{"name", <the fields of one patch>}, ...]}`` (one entry per face, in order)."""
+    patches = list(patches)
+    k = len(patches)
+    names = [None] * k if names is None else list(names)
+    fields = [None] * k if scalar_fields is None else list(scalar_fields)
+    stds = [None] * k if scalar_field_stds is None else list(scalar_field_stds)
+    faces = [{"name": n, **_patch_doc(p, f, sd, f"face {i}: ")}
+             for i, (p, n, f, sd) in enumerate(zip(patches, names, fields, stds))]
+    doc = {"format": FORMAT, "version": VERSION, "faces": faces}
+    _atomic_write_text(pathlib.Path(path), json.dumps(doc, indent=1) + "\n")
+    logger.info("wrote %d spline faces %s", k, path)
+
+
+def read_part_json(path: str | os.PathLike) -> list:
+    """The faces (SplinePatch list) of a file of :func:`write_part_json` (or of
+    :func:`write_spline_json`: one face)."""
+    doc = _load_json(path)
+    if "faces" not in doc:
+        return [read_spline_json(path)]
+    if not isinstance(doc["faces"], list) or not doc["faces"]:
+        raise ValueError(f"{path}: field 'faces' must be a non-empty list")
+    return [_patch_from_doc(face, f"{path} face {i}") for i, face in enumerate(doc["faces"])]
 
 
 def _load_json(path: str | os.PathLike) -> dict:
@@ -133,7 +168,12 @@ def _field(doc: dict, path, name: str, shape_hint: str) -> np.ndarray:
 
 def read_spline_json(path: str | os.PathLike) -> SplinePatch:
     """Read a patch written by ``write_spline_json`` (layout in the module docstring)."""
-    doc = _load_json(path)
+    return _patch_from_doc(_load_json(path), path)
+
+
+def _patch_from_doc(doc: dict, path) -> SplinePatch:
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: expected an object with the fields of a patch")
     degrees = _field(doc, path, "degrees", "[p, q]")
     if degrees.shape != (2,) or np.any(degrees != np.round(degrees)) or np.any(degrees < 1):
         raise ValueError(f"{path}: field 'degrees' must be two integers >= 1, "

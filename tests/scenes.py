@@ -125,3 +125,63 @@ def family_scene(divisor: int | None, family: dict = FAMILY) -> Scene:
     arrays = render_stereo(specimen, cameras, supersample=family["supersample"],
                            noise_std=family["noise_std"], seed=family["noise_seed"], progress=False)
     return Scene(specimen, tuple(cameras), tuple(arrays))
+
+
+# ----------------------------------------------------------------------------- CAD parts
+#: issue 11's parts, each nominal given as an IGES file (``write_iges``): a cylindrical panel
+#: (nominal radius 100 mm, 50 mm along its axis x, 40 mm across) whose true radius is 95 mm
+#: with a waviness of 30 um along x; and a folded plate of two flat 30 x 40 mm faces meeting
+#: at a crease along x = 0 (nominal slope 0.1 on each side, true slope 0.105 with a bow of
+#: 40 um across). 480 x 320 px over 72 mm, 4 px speckle, noise of 2 gray levels.
+CAD_PARTS = dict(radius_mm=100.0, true_radius_mm=95.0, wave_mm=0.03, panel_mm=(50.0, 40.0),
+                 slope=0.1, true_slope=0.105, bow_mm=0.04, folded_mm=(60.0, 40.0))
+
+
+def _panel_height(x, y, radius, wave, length):
+    return np.sqrt(radius ** 2 - y ** 2) - radius + wave * np.cos(np.pi * x / length)
+
+
+def _panel_gradient(x, y, radius, wave, length):
+    return (-wave * np.pi / length * np.sin(np.pi * x / length) + 0 * y,
+            -y / np.sqrt(radius ** 2 - y ** 2) + 0 * x)
+
+
+def _folded_height(x, y, slope, bow, width):
+    return -slope * np.abs(x) + bow * np.cos(np.pi * y / width)
+
+
+def _folded_gradient(x, y, slope, bow, width):
+    return -slope * np.sign(x) + 0 * y, -bow * np.pi / width * np.sin(np.pi * y / width) + 0 * x
+
+
+def cad_nominal(part: str) -> list:
+    """The nominal faces (splines) of a CAD part: "panel" (one NURBS) or "folded" (two faces)."""
+    from georeg_plugin.geometries import cylinder, quadrilateral, transformed
+    p = CAD_PARTS
+    if part == "panel":
+        length, width = p["panel_mm"]
+        angle = 2 * np.degrees(np.arcsin(0.5 * width / p["radius_mm"]))
+        return [transformed(cylinder(p["radius_mm"], length, angle, axis="x"),
+                            translation=(0.0, 0.0, -p["radius_mm"]))]
+    half, width = 0.5 * p["folded_mm"][0], p["folded_mm"][1]
+    z = -p["slope"] * half
+    w = 0.5 * width
+    return [quadrilateral([[-half, -w, z], [0, -w, 0], [0, w, 0], [-half, w, z]]),
+            quadrilateral([[0, -w, 0], [half, -w, z], [half, w, z], [0, w, 0]])]
+
+
+def cad_scene(part: str) -> Scene:
+    """The rendered part ("panel" or "folded", see ``CAD_PARTS``) with its truth."""
+    p = CAD_PARTS
+    cameras = demo_cameras(image_size=(480, 320), field_mm=72.0)
+    if part == "panel":
+        args = dict(radius=p["true_radius_mm"], wave=p["wave_mm"], length=p["panel_mm"][0])
+        height, gradient, size = _panel_height, _panel_gradient, p["panel_mm"]
+    else:
+        args = dict(slope=p["true_slope"], bow=p["bow_mm"], width=p["folded_mm"][1])
+        height, gradient, size = _folded_height, _folded_gradient, p["folded_mm"]
+    specimen = Specimen(*size, height=functools.partial(height, **args),
+                        height_gradient=functools.partial(gradient, **args),
+                        speckle_mm=speckle_mm_for(cameras[0], 4.0), seed=9)
+    arrays = render_stereo(specimen, cameras, supersample=3, noise_std=2.0, seed=12, progress=False)
+    return Scene(specimen, tuple(cameras), tuple(arrays))

@@ -1,0 +1,185 @@
+"""A part of several faces (untrimmed spline patches): one FE mesh, glued spline levels.
+
+A real part is several patches assembled like finite elements (ARCHITECTURE, "A part, not
+a patch"):
+
+* one Q9 mesh per face (Eq. 17 when the face's degrees are <= 2; a higher degree, e.g. a
+  bicubic CAD face, gets its nodes on the surface at the same parametric Q9 positions and
+  Eq. 16 then holds only approximately: the operators only need ``R_J(xi_I)`` at the nodes);
+* the meshes are welded where faces share an edge: conforming when the edge nodes of both
+  faces coincide, else :class:`NonConformingFacesError` names the two faces;
+* each level moves the control points of every face by vectors (:mod:`georeg_plugin.curved`),
+  one vector where control points of several faces coincide (a shared edge): the correction
+  ``u`` is continuous across the edge;
+* a node on a sharp edge (crease) is ONE FE node: its unknown is a displacement along the
+  core's node normal, the area-weighted mean of both faces' normals (not the normal of
+  either face); it reads ``n_I . u(xi_I)`` with ``u`` taken on the face of lower index,
+  which is the same vector on both faces when the edge's control points are glued. No
+  face normal is shared across the crease: each face's shape is its own NURBS.
+
+``PartMesh.uv`` holds, for each node, its parameters on the face ``node_face`` (the face of
+lower index for a node of an edge); ``element_face`` is each element's face (cell data).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Sequence
+
+import numpy as np
+
+from .curved import RANK_RTOL, vector_gluing, vector_level
+from .fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
+from .operators import MultilevelSpace
+from .patch import SplinePatch, invert_points
+from .refine import refine_uniform
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["PartMesh", "part_mesh", "part_space", "NonConformingFacesError"]
+
+
+class NonConformingFacesError(ValueError):
+    """Two faces meet along an edge whose FE nodes do not coincide."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PartMesh:
+    """The FE mesh of a part of several faces.
+
+    Attributes
+    ----------
+    nodes : (n, 3) mm; connectivity : (ne, 9) gmsh quad9 order (or (ne, 4) quad);
+    cell_type : meshio cell type; uv : (n, 2) parameters of each node on its face;
+    node_face : (n,) face of each node's ``uv``; element_face : (ne,) face of each element;
+    face_names : one name per face; exact : Eq. 16 holds (every face's degree <= the
+    element degree).
+    """
+
+    nodes: np.ndarray
+    connectivity: np.ndarray
+    cell_type: str
+    uv: np.ndarray
+    node_face: np.ndarray
+    element_face: np.ndarray
+    face_names: tuple
+    exact: bool
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.face_names)
+
+
+def _face_label(names: Sequence[str], k: int) -> str:
+    return f"face {k} ({names[k]!r})" if names[k] else f"face {k}"
+
+
+def _on_boundary(patch: SplinePatch, uv: np.ndarray) -> np.ndarray:
+    lo, hi = patch.bounds
+    tol = 1e-12 * (hi - lo)
+    return np.any((uv <= lo + tol) | (uv >= hi - tol), axis=1)
+
+
+def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
+              family: str = "Q9", weld_rtol: float = 1e-7) -> PartMesh:
+    """One FE mesh over the faces (each already refined to the FE resolution).
+
+    Parameters
+    ----------
+    faces : the faces' splines, one element per knot span (Eq. 17).
+    names : one name per face (errors name them), optional.
+    family : "Q9" or "Q4".
+    weld_rtol : nodes closer than ``weld_rtol`` times the part's size are one node.
+
+    Raises
+    ------
+    NonConformingFacesError
+        A boundary node of one face lies on another face without being one of its nodes.
+    """
+    faces = list(faces)
+    if not faces:
+        raise ValueError("part_mesh: at least one face is needed")
+    names = tuple(names) if names is not None else tuple("" for _ in faces)
+    if len(names) != len(faces):
+        raise ValueError(f"part_mesh: {len(faces)} faces, {len(names)} names")
+    degree = ELEMENT_DEGREES[family]
+    exact = all(max(f.degrees) <= degree for f in faces)
+    meshes = [fe_mesh_from_spline(f, family, exact=max(f.degrees) <= degree) for f in faces]
+    for k, f in enumerate(faces):
+        if max(f.degrees) > degree:
+            logger.warning("%s has degrees %s > %d: its %s nodes are placed on the surface, "
+                           "Eq. 16 holds only approximately", _face_label(names, k), f.degrees,
+                           degree, family)
+    offsets = np.cumsum([0] + [m.n_nodes for m in meshes])
+    nodes = np.vstack([m.nodes for m in meshes])
+    uv = np.vstack([m.uv for m in meshes])
+    node_face = np.repeat(np.arange(len(faces)), [m.n_nodes for m in meshes])
+    conn = np.vstack([m.connectivity + o for m, o in zip(meshes, offsets)])
+    element_face = np.repeat(np.arange(len(faces)), [m.n_elements for m in meshes])
+    size = float(np.ptp(nodes, axis=0).max()) or 1.0
+    representative = coincident_groups(nodes, weld_rtol * size)   # lowest index: lowest face
+    _check_conforming(faces, meshes, offsets, representative, names, weld_rtol * size)
+    kept, renumber = np.unique(representative, return_inverse=True)
+    logger.info("part mesh: %d faces, %d elements, %d nodes (%d welded)", len(faces), len(conn),
+                kept.size, len(nodes) - kept.size)
+    return PartMesh(nodes=nodes[kept], connectivity=renumber[conn], cell_type=meshes[0].cell_type,
+                    uv=uv[kept], node_face=node_face[kept], element_face=element_face,
+                    face_names=names, exact=exact)
+
+
+def _check_conforming(faces, meshes, offsets, representative, names, tol) -> None:
+    """Every boundary node of a face lying on another face must be one of its nodes."""
+    for a, (fa, ma) in enumerate(zip(faces, meshes)):
+        edge = np.flatnonzero(_on_boundary(fa, ma.uv))
+        for b, fb in enumerate(faces):
+            if a == b:
+                continue
+            lo, hi = ma.nodes[edge].min(0) - tol, ma.nodes[edge].max(0) + tol
+            box = fb.control_points.reshape(-1, 3)          # convex hull: a quick rejection
+            if np.any(box.max(0) < lo) or np.any(box.min(0) > hi):
+                continue
+            _, distance = invert_points(fb, ma.nodes[edge])
+            touching = edge[distance <= tol]
+            if not touching.size:
+                continue
+            own = set(representative[offsets[b]:offsets[b + 1]].tolist())
+            alone = [i for i in touching if representative[offsets[a] + i] not in own]
+            if alone:
+                i = alone[0]
+                raise NonConformingFacesError(
+                    f"{_face_label(names, a)} and {_face_label(names, b)} meet along an edge "
+                    f"whose FE nodes do not coincide ({len(alone)} nodes of "
+                    f"{_face_label(names, a)} lie on {_face_label(names, b)} between its nodes, "
+                    f"first at {np.round(ma.nodes[i], 6).tolist()} mm): give both faces the "
+                    "same knot spans along their shared edge")
+
+
+def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarray,
+               node_face: np.ndarray, node_normals: np.ndarray, glue: bool = True,
+               rtol: float = RANK_RTOL) -> MultilevelSpace:
+    """The spline levels of a part: every face refined dyadically, vector control points
+    glued where faces share them (:func:`~georeg_plugin.curved.vector_level`).
+
+    ``uv``, ``node_face``: a :class:`PartMesh`'s; ``node_normals`` (n, 3): the FE unknowns'.
+
+    ``MultilevelSpace.patches[k]`` is then the tuple of the faces of level ``k`` (coarse to
+    fine); ``space.vector`` holds the control vectors of each level.
+    """
+    if int(n_levels) < 1:
+        raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    levels = [list(coarse_faces)]
+    for _ in range(int(n_levels) - 1):
+        levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
+    node_face = np.asarray(node_face)
+    rows = [np.flatnonzero(node_face == k) for k in range(len(levels[0]))]
+    uvs = [np.asarray(uv)[r] for r in rows]
+    n_fe = len(node_face)
+    vector = [vector_level(faces, rows, uvs, node_normals, n_fe, glue, rtol)
+              for faces in reversed(levels)]
+    if glue:
+        shared = vector_gluing(levels[0])
+        logger.info("part space: %d faces, %d levels, ranks %s, %d control points glued at "
+                    "the coarsest level", len(levels[0]), len(levels),
+                    [v.operator.shape[0] for v in vector], shared.shape[1] - shared.shape[0])
+    return MultilevelSpace(patches=tuple(tuple(f) for f in levels),
+                           operators=tuple(v.operator for v in vector), vector=tuple(vector))
