@@ -206,7 +206,11 @@ class GeometricRegularization:
         logger.debug("scale %d -> spline level %d: %d dofs", scale, s, seen.size)
 
         def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
-            b_s = C @ np.asarray(b, dtype=float)                       # Eq. 19
+            b = np.asarray(b, dtype=float)
+            if b.shape != (C.shape[1],):
+                raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
+                                 f"spline level {s}")
+            b_s = C @ b                                                # Eq. 19
             d_s = np.zeros(seen.size)
             if solve is not None:
                 d_s[seen] = solve(b_s[seen])

@@ -254,3 +254,10 @@ def _fails_with(capsys, options, folder, tmp_path, text):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("georeg: error: ") and text in err[0], err
     assert not out.exists()
+
+
+def test_an_unknown_jacobian_is_named(series, tmp_path, capsys):
+    folder, _ = series
+    config = _config(folder, displacement='method = "fe"\njacobian = "deformed"')
+    _fails_naming(capsys, config, tmp_path / "out", "[displacement]", "jacobian", "deformed",
+                  '"reference"', '"current"')
