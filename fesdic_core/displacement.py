@@ -13,6 +13,17 @@ of the shape (:mod:`fesdic_core.damping`): the residual never grows. The referen
 scale (quadrature, reference gray levels) is computed once (:func:`displacement_reference`)
 and serves every frame of a series.
 
+By default (``jacobian = "reference"``) the Gauss-Newton is the modified one of FE-DIC
+(Besnard, Hild and Roux 2006): the derivative of the residual is taken from the reference
+images at the reference points (:func:`~fesdic_core.displacement_residual.reference_jacobian`),
+so ``H`` of each scale is built once with the reference and factorized once per process
+(:class:`~fesdic_core.solvers.CachedFactorization` over the solver's ``factorize``); an
+iteration is the deformed images' residual, ``b = J^T r`` and a back-substitution. The
+residual, hence the solution, is the full Gauss-Newton's (``jacobian = "current"``: the
+deformed images' derivative at the current state, ``H`` rebuilt at every iteration); only the
+path to it differs (the Jacobian ignores the displacement gradient, the contrast change and the
+change of each camera's projection derivative, all small where DIC works).
+
 A displacement is trusted only if, at the finest scale, the residual is consistent with the
 images' noise, the deformed images show texture, the field stayed bounded and the
 Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`).

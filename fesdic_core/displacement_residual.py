@@ -239,10 +239,11 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
             with np.errstate(invalid="ignore"):
                 mask[c, b] &= (lin.inv_z > 0.0) & image.inside(x)
             x[~mask[c, b]] = 0.0                                  # keep unseen points harmless
-            v, grad = image.evaluate_with_gradient(x)
-            value[c, b] = v
             if jacobian:
+                value[c, b], grad = image.evaluate_with_gradient(x)
                 pull[c, b] = lin.pull_point(grad)                  # J_c^T grad g_c
+            else:
+                value[c, b] = image.evaluate(x)                   # (the value-only pass)
 
     for_each_span(sample, len(blocks))
     r = np.zeros((2, g))
