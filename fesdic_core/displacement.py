@@ -38,8 +38,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .damping import damped_step, relaxed
-from .displacement_residual import (DisplacementResidual, ReferenceView, chi_square_change,
+from .displacement_residual import (DisplacementResidual, ReferenceView, chi_square,
                                     displacement_operators, displacement_residual,
                                     displacement_rhs, reference_view)
 from .driver import (MeasurementInputError, MeasurementSettings, ScaleReport, check_inputs,
@@ -48,7 +47,8 @@ from .image import Image, pyramid
 from .mesh import SurfaceMesh
 from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import pixel_quadrature
-from .shape import GaussNewtonLog, damped
+from .gauss_newton import damped_gauss_newton
+from .shape import GaussNewtonLog
 from .solvers import CachedFactorization, DirectSolver, StepSolver
 
 logger = logging.getLogger(__name__)
@@ -157,10 +157,11 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
                               jacobian: str = "current") -> DisplacementGNResult:
     """Minimise both cameras' residual over ``U`` (n, 3) at one scale, steps by ``solver``.
 
-    As :func:`fesdic_core.shape.shape_gauss_newton`: Levenberg-Marquardt guard, convergence
-    when the accepted step is below ``tol_mm`` (largest component), when it changes the fit
-    by less than one unit of chi-square, or when no damped step lowers the residual;
-    ``residual_rtol`` also stops a coarse scale whose residual stagnates.
+    The loop of the shape (:func:`fesdic_core.gauss_newton.damped_gauss_newton`):
+    Levenberg-Marquardt guard, convergence when the step is below ``tol_mm`` (largest
+    component; the plain step is tested before the images are evaluated at its end), when it
+    changes the fit by less than one unit of chi-square, or when no damped step lowers the
+    residual; ``residual_rtol`` also stops a coarse scale whose residual stagnates.
 
     ``jacobian``: "current" (full Gauss-Newton: ``H`` and ``b`` from the deformed images'
     derivative at ``U``, every iteration) or "reference" (modified Gauss-Newton: the view's
@@ -178,53 +179,28 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
     def evaluate(U: np.ndarray) -> DisplacementResidual:
         return displacement_residual(U, ref, images, normalisation, not frozen)
 
-    U = np.asarray(U0, float).reshape(-1).copy()
-    res = evaluate(U)
-    mu, converged, it, stop = 0.0, False, 0, "iteration limit"
-    damped_H: dict[float, object] = {}           # H + mu diag H of the constant H, per mu
-    for it in range(1, max_iter + 1):
-        std = res.std_percent
-        if not np.isfinite(std):
-            logger.warning("displacement GN scale %d: no integration point is seen", scale)
-            stop = "no point seen"
-            break
-        if frozen:
-            H, b = ref.hessian, displacement_rhs(quad, ref.dr_du, res.r)
-        else:
-            (H, b), damped_H = displacement_operators(quad, res), {}
+    def operators(res: DisplacementResidual):
+        if frozen:                                   # the same H object at every iteration
+            return ref.hessian, displacement_rhs(quad, ref.dr_du, res.r)
+        return displacement_operators(quad, res)
 
-        def propose(mu: float):
-            if mu not in damped_H:
-                damped_H[mu] = damped(H, mu)                 # mu = 0: H itself
-            d = np.asarray(solver.solve(damped_H[mu], b, U, scale), float)
-            return (d, evaluate(U + d)) if np.all(np.isfinite(d)) else None
-
-        accepted, mu = damped_step(propose, std, mu, max_damping)
-        if accepted is None:
-            converged, stop = True, "no descent"
-            break
-        d, trial = accepted
-        change = chi_square_change(res, trial, quad)
-        U, res = U + d, trial
-        step = float(np.max(np.abs(d))) if d.size else 0.0
+    def on_step(it: int, std: float, res: DisplacementResidual, step: float, mu: float) -> None:
         if log is not None:
             log.add(**(context or {}), scale=scale, stage="displacement", iteration=it,
                     residual_percent=res.std_percent, step=step, damping=mu,
                     n_points=res.n_points)
         logger.debug("displacement GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, "
                      "mu %.1e", scale, it, std, res.std_percent, step, mu)
-        mu = relaxed(mu)
-        if step < tol_mm:
-            converged, stop = True, "step"
-            break
-        if abs(change) < 1.0:
-            converged, stop = True, "noise"
-            break
-        if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
-            converged, stop = True, "residual"
-            break
-    return DisplacementGNResult(U=U.reshape(-1, 3), residual=dataclasses.replace(res, dr_du=None),
-                                iterations=it, converged=converged, damping=mu, stop=stop)
+
+    U = np.asarray(U0, float).reshape(-1)
+    out = damped_gauss_newton(U, evaluate(U), evaluate, operators,
+                              lambda H, b, U: solver.solve(H, b, U, scale),
+                              lambda res: chi_square(res, quad), tol_mm, max_iter, max_damping,
+                              residual_rtol, on_step, f"displacement GN scale {scale}")
+    return DisplacementGNResult(U=out.q.reshape(-1, 3),
+                                residual=dataclasses.replace(out.residual, dr_du=None),
+                                iterations=out.iterations, converged=out.converged,
+                                damping=out.damping, stop=out.stop)
 
 
 @dataclass(frozen=True)

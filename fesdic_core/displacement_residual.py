@@ -358,11 +358,3 @@ def chi_square(res: DisplacementResidual, quad: PixelQuadrature) -> tuple[float,
     w = np.where(res.mask, quad.weight_mm2, 0.0)
     return float(np.sum(w * res.r * res.r)), res.n_points
 
-
-def chi_square_change(before: DisplacementResidual, after: DisplacementResidual,
-                      quad: PixelQuadrature) -> float:
-    """How much a step improved the fit in units of chi-square (as
-    :func:`fesdic_core.shape.chi_square_change`): below 1 the data cannot tell them apart."""
-    c0, n = chi_square(before, quad)
-    c1, _ = chi_square(after, quad)
-    return (c0 - c1) * n / c0 if c0 > 0.0 and n else float("inf")
