@@ -91,7 +91,7 @@ def reference_view(quad: PixelQuadrature, nodes: np.ndarray, images: Sequence, c
     """
     X = quad.points(nodes)
     f = np.zeros((2, len(X)))
-    pull = np.zeros((2, len(X), 3))
+    pull = None if normalisation is None else np.zeros((2, len(X), 3))
     seen = np.ones((2, len(X)), dtype=bool) if extra_mask is None else \
         np.tile(np.asarray(extra_mask, bool), (2, 1))
     for c, (image, cam) in enumerate(zip(images, cameras)):
@@ -99,14 +99,15 @@ def reference_view(quad: PixelQuadrature, nodes: np.ndarray, images: Sequence, c
         with np.errstate(invalid="ignore"):
             seen[c] &= cam.in_front(X) & image.inside(x)
         x[~seen[c]] = 0.0
-        value, grad = image.evaluate_with_gradient(x)
-        f[c] = np.where(seen[c], value, 0.0)
-        pull[c] = lin.pull_point(grad)                                  # J_c^T grad f_c
+        if pull is None:
+            f[c] = np.where(seen[c], image.evaluate(x), 0.0)
+        else:
+            value, grad = image.evaluate_with_gradient(x)
+            f[c] = np.where(seen[c], value, 0.0)
+            pull[c] = lin.pull_point(grad)                              # J_c^T grad f_c
     view = ReferenceView(scale=int(scale), quad=quad, X=X, cameras=tuple(cameras),
                          images=tuple(images), f=f, seen=seen)
-    if normalisation is None:
-        return view
-    return reference_jacobian(view, pull, normalisation)
+    return view if pull is None else reference_jacobian(view, pull, normalisation)
 
 
 def reference_jacobian(view: ReferenceView, pull: np.ndarray, normalisation: str
