@@ -176,44 +176,47 @@ def iteration(repeat: int) -> None:
     print(f"\nonce per series (jacobian = 'reference'): reference state with its Jacobian and H "
           f"{t_ref:.2f} s, factorization of H {t_factor:.2f} s")
     res = displacement_residual(U, view, deformed, jacobian=False)
-    stages = {"b = J^T r": [], "back-substitution (3n dofs)": [],
-              "residual (no derivative)": [], "one iteration": []}
-    for _ in range(repeat):
-        t0 = time.perf_counter()
+
+    def modified(res):
         b = displacement_rhs(view.quad, view.dr_du, res.r)
-        t1 = time.perf_counter()
+        yield
         d = solver.solve(view.hessian, b, U, 0)
-        t2 = time.perf_counter()
-        res = displacement_residual(U + d, view, deformed, jacobian=False)
-        t3 = time.perf_counter()
-        for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t3 - t0)):
-            stages[key].append(dt)
-    print(f"median of {repeat} (threads: FESDIC_THREADS={os.environ.get('FESDIC_THREADS', 'default')}), "
-          "jacobian = 'reference':")
-    for key, times in stages.items():
-        print(f"  {key:28s} {statistics.median(times):7.3f} s")
+        yield
+        yield displacement_residual(U + d, view, deformed, jacobian=False)
+
+    _stages("reference", ("b = J^T r", "back-substitution (3n dofs)", "residual (no derivative)"),
+            modified, res, repeat)
     # one Gauss-Newton iteration as displacement_gauss_newton runs it: the operators of the
     # current residual, the solve, and the residual with its derivative at the new state
     # (which the next iteration's operators use)
-    del view, ref, solver, b, d                            # (memory: the full GN's own below)
+    del view, ref, solver                                 # (memory: the full GN's own below)
     ref = displacement_reference(mesh, reference, cams,
                                  DisplacementSettings(scales=(0,), jacobian="current"))
     view = ref.view(0)
-    res = displacement_residual(U, view, deformed)
-    stages = {"assembly of H, b": [], "sparse solve (3n dofs)": [],
-              "residual + derivative": [], "one iteration": []}
-    for _ in range(repeat):
-        t0 = time.perf_counter()
+
+    def full(res):
         H, b = displacement_operators(view.quad, res)
-        t1 = time.perf_counter()
+        yield
         d = sparse_solve(H, b)
-        t2 = time.perf_counter()
-        res = displacement_residual(U + d, view, deformed)
-        t3 = time.perf_counter()
-        for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t3 - t0)):
+        yield
+        yield displacement_residual(U + d, view, deformed)
+
+    _stages("current", ("assembly of H, b", "sparse solve (3n dofs)", "residual + derivative"),
+            full, displacement_residual(U, view, deformed), repeat)
+
+
+def _stages(jacobian: str, names, iteration, res, repeat: int) -> None:
+    """Median times of the three stages of ``iteration(res)`` (a generator that yields after
+    each stage, the new residual last) and of the whole, over ``repeat`` iterations."""
+    stages = {name: [] for name in (*names, "one iteration")}
+    for _ in range(repeat):
+        times = [time.perf_counter()]
+        for res in iteration(res):
+            times.append(time.perf_counter())
+        for key, dt in zip(stages, (*np.diff(times), times[-1] - times[0])):
             stages[key].append(dt)
     print(f"median of {repeat} (threads: FESDIC_THREADS={os.environ.get('FESDIC_THREADS', 'default')}), "
-          "jacobian = 'current':")
+          f"jacobian = {jacobian!r}:")
     for key, times in stages.items():
         print(f"  {key:28s} {statistics.median(times):7.3f} s")
 

@@ -80,10 +80,18 @@ static void evaluate(const double *padded, Py_ssize_t h, Py_ssize_t w, Py_ssize_
 
 static PyObject *py_evaluate(PyObject *self, PyObject *args)
 {
-    Py_buffer padded, xy, value, grad;
+    Py_buffer padded, xy, value, grad = {0};
     Py_ssize_t h, w, pad;
-    if (!PyArg_ParseTuple(args, "y*nnny*w*w*", &padded, &h, &w, &pad, &xy, &value, &grad))
+    PyObject *grad_object;
+    if (!PyArg_ParseTuple(args, "y*nnny*w*O", &padded, &h, &w, &pad, &xy, &value, &grad_object))
         return NULL;
+    const int with_grad = grad_object != Py_None;
+    if (with_grad && PyObject_GetBuffer(grad_object, &grad, PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&padded);
+        PyBuffer_Release(&xy);
+        PyBuffer_Release(&value);
+        return NULL;
+    }
     PyObject *result = NULL;
     const Py_ssize_t n = xy.len / (Py_ssize_t)(2 * sizeof(double));
     if (h < 1 || w < 1 || pad < 2) {
@@ -92,12 +100,12 @@ static PyObject *py_evaluate(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "_bspline.evaluate: padded coefficients of the wrong size");
     } else if (xy.len % (Py_ssize_t)(2 * sizeof(double)) != 0
                || value.len != (Py_ssize_t)sizeof(double) * n
-               || grad.len != (Py_ssize_t)(2 * sizeof(double)) * n) {
+               || (with_grad && grad.len != (Py_ssize_t)(2 * sizeof(double)) * n)) {
         PyErr_SetString(PyExc_ValueError, "_bspline.evaluate: xy (n, 2), value (n,), grad (n, 2) mismatch");
     } else {
         Py_BEGIN_ALLOW_THREADS
         evaluate((const double *)padded.buf, h, w, pad, (const double *)xy.buf, n,
-                 (double *)value.buf, (double *)grad.buf);
+                 (double *)value.buf, with_grad ? (double *)grad.buf : NULL);
         Py_END_ALLOW_THREADS
         result = Py_None;
         Py_INCREF(result);
@@ -105,46 +113,15 @@ static PyObject *py_evaluate(PyObject *self, PyObject *args)
     PyBuffer_Release(&padded);
     PyBuffer_Release(&xy);
     PyBuffer_Release(&value);
-    PyBuffer_Release(&grad);
-    return result;
-}
-
-static PyObject *py_evaluate_value(PyObject *self, PyObject *args)
-{
-    Py_buffer padded, xy, value;
-    Py_ssize_t h, w, pad;
-    if (!PyArg_ParseTuple(args, "y*nnny*w*", &padded, &h, &w, &pad, &xy, &value))
-        return NULL;
-    PyObject *result = NULL;
-    const Py_ssize_t n = xy.len / (Py_ssize_t)(2 * sizeof(double));
-    if (h < 1 || w < 1 || pad < 2) {
-        PyErr_SetString(PyExc_ValueError, "_bspline.evaluate_value: need h, w >= 1 and pad >= 2");
-    } else if (padded.len != (Py_ssize_t)sizeof(double) * (h + 2 * pad) * (w + 2 * pad)) {
-        PyErr_SetString(PyExc_ValueError, "_bspline.evaluate_value: padded coefficients of the wrong size");
-    } else if (xy.len % (Py_ssize_t)(2 * sizeof(double)) != 0
-               || value.len != (Py_ssize_t)sizeof(double) * n) {
-        PyErr_SetString(PyExc_ValueError, "_bspline.evaluate_value: xy (n, 2), value (n,) mismatch");
-    } else {
-        Py_BEGIN_ALLOW_THREADS
-        evaluate((const double *)padded.buf, h, w, pad, (const double *)xy.buf, n,
-                 (double *)value.buf, NULL);
-        Py_END_ALLOW_THREADS
-        result = Py_None;
-        Py_INCREF(result);
-    }
-    PyBuffer_Release(&padded);
-    PyBuffer_Release(&xy);
-    PyBuffer_Release(&value);
+    if (with_grad)
+        PyBuffer_Release(&grad);
     return result;
 }
 
 static PyMethodDef methods[] = {
-    {"evaluate_value", py_evaluate_value, METH_VARARGS,
-     "evaluate_value(padded, h, w, pad, xy, value): bicubic B-spline value only "
-     "(C-contiguous float64 buffers; value is written)."},
     {"evaluate", py_evaluate, METH_VARARGS,
      "evaluate(padded, h, w, pad, xy, value, grad): bicubic B-spline value and gradient "
-     "(C-contiguous float64 buffers; value and grad are written)."},
+     "(C-contiguous float64 buffers; value and grad are written; grad None: the value only)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_bspline",

@@ -248,7 +248,7 @@ class Image:
         value = np.empty(len(xy))
 
         def run(block: slice) -> None:
-            _bspline.evaluate_value(self._padded, h, w, _PAD, xy[block], value[block])
+            _bspline.evaluate(self._padded, h, w, _PAD, xy[block], value[block], None)
 
         for_each_block(run, len(xy), _PARALLEL_BLOCK)
         return value
