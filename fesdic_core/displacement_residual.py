@@ -192,18 +192,23 @@ def _element_statistics(values: np.ndarray, mask: np.ndarray, quad: PixelQuadrat
     g = len(values)
     if normalisation == "none":
         return np.zeros(g), np.ones(g)
+    starts = quad.element_runs[0] if normalisation == "element" else np.zeros(1, dtype=np.intp)
+    return _run_statistics(values, mask, starts, _SIGMA_FLOOR * dynamic_range)
+
+
+def _run_statistics(values: np.ndarray, mask: np.ndarray, starts: np.ndarray, floor: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation (g,) of ``values`` over the ``mask``-ed points of each run
+    of points (runs from ``starts``, increasing, the first 0: an element's points are a
+    run), at every point of the run; deviations floored at ``floor``."""
     seen = mask.astype(float)
     fm = values * seen
-    moments = np.stack([quad.element_sum(seen), quad.element_sum(fm), quad.element_sum(fm * values)])
-    if normalisation == "global":
-        moments = moments.sum(axis=1, keepdims=True)
-    count = np.maximum(moments[0], 1.0)
-    mean = moments[1] / count
-    sigma = np.maximum(np.sqrt(np.maximum(moments[2] / count - mean ** 2, 0.0)),
-                       _SIGMA_FLOOR * dynamic_range)
-    if normalisation == "global":
-        return np.full(g, mean[0]), np.full(g, sigma[0])
-    return mean[quad.element], sigma[quad.element]
+    count = np.maximum(np.add.reduceat(seen, starts), 1.0)
+    mean = np.add.reduceat(fm, starts) / count
+    sigma = np.maximum(np.sqrt(np.maximum(np.add.reduceat(fm * values, starts) / count
+                                          - mean ** 2, 0.0)), floor)
+    lengths = np.diff(np.append(starts, len(values)))
+    return np.repeat(mean, lengths), np.repeat(sigma, lengths)
 
 
 def _pooled_percent(percent: np.ndarray, mask: np.ndarray) -> float:
@@ -231,10 +236,23 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
     mask = ref.seen.copy()
     value = np.zeros((2, g))
     pull = np.zeros((2, g, 3)) if jacobian else None
+    r, sigma_ref = np.zeros((2, g)), np.empty((2, g))
+    dyn = ref.dynamic_range
     blocks = quad.element_blocks(_BLOCK)
+    run_starts = quad.element_runs[0]
+
+    def normalise(c: int, span: slice, statistics) -> None:
+        """Remark 2 on the points ``span`` of camera ``c``: the residual and its scales."""
+        m, f, v = mask[c, span], ref.f[c, span], value[c, span]
+        mean0, s0 = statistics(f, m, dyn[c])
+        mean1, s1 = statistics(v, m, float(images[c].dynamic_range))
+        r[c, span] = np.where(m, (f - mean0) / s0 - (v - mean1) / s1, 0.0)
+        sigma_ref[c, span] = s0
+        if jacobian:
+            pull[c, span] *= np.where(m, -1.0 / s1, 0.0)[:, None]  # dr_c/du = -J^T grad g / s'
 
     def sample(i: int) -> None:
-        b = blocks[i][0]
+        b, runs = blocks[i]
         for c, (image, cam) in enumerate(zip(images, ref.cameras)):
             x, lin = cam.linearise(X[b])
             with np.errstate(invalid="ignore"):
@@ -245,20 +263,15 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
                 pull[c, b] = lin.pull_point(grad)                  # J_c^T grad g_c
             else:
                 value[c, b] = image.evaluate(x)                   # (the value-only pass)
+            if normalisation == "element":                        # the block's whole elements
+                starts = run_starts[runs] - b.start
+                normalise(c, b, lambda v, m, d: _run_statistics(v, m, starts, _SIGMA_FLOOR * d))
 
     for_each_span(sample, len(blocks))
-    r = np.zeros((2, g))
-    sigma_ref = np.ones((2, g))
-    dyn = ref.dynamic_range
-    for c in range(2):
-        m = mask[c]
-        mean0, s0 = _element_statistics(ref.f[c], m, quad, dyn[c], normalisation)
-        mean1, s1 = _element_statistics(value[c], m, quad, float(images[c].dynamic_range),
-                                        normalisation)
-        r[c] = np.where(m, (ref.f[c] - mean0) / s0 - (value[c] - mean1) / s1, 0.0)   # Remark 2
-        sigma_ref[c] = s0
-        if jacobian:
-            pull[c] *= np.where(m, -1.0 / s1, 0.0)[:, None]       # dr_c/du = -J^T grad g / s'
+    if normalisation != "element":                                # over the whole region
+        for c in range(2):
+            normalise(c, slice(None),
+                      lambda v, m, d: _element_statistics(v, m, quad, d, normalisation))
     gray = 100.0 * r * sigma_ref / dyn[:, None]
     return DisplacementResidual(r=r, mask=mask, dr_du=pull, sigma_ref=sigma_ref,
                                 dynamic_range=dyn, std_percent=_pooled_percent(gray, mask))

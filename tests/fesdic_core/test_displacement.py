@@ -12,6 +12,7 @@ import scipy.sparse as sps
 
 from fesdic_core.displacement import (DisplacementSettings, displacement_reference,
                                       measure_displacement)
+from fesdic_core import displacement_residual as displacement_residual_module
 from fesdic_core.displacement_residual import (chi_square, displacement_operators,
                                                displacement_residual, displacement_rhs,
                                                reference_view)
@@ -299,3 +300,36 @@ def test_settings_are_checked():
         DisplacementSettings(normalisation="local")
     with pytest.raises(ValueError, match="jacobian must be one of .*'deformed'"):
         DisplacementSettings(jacobian="deformed")
+
+
+def test_the_per_block_normalisation_is_the_per_element_one(scene, monkeypatch):
+    """The residual normalises each element within its block of points (threads; blocks of
+    about 2000 points here, several elements each): the same residual and scales as the
+    means and deviations over each element's points taken over the whole region
+    (element_sum), to round-off."""
+    monkeypatch.setattr(displacement_residual_module, "_BLOCK", 2000)
+    cameras, pair = scene
+    mesh = rectangle_mesh(44.0, 30.0, 4, 3, family="Q9")
+    quad = pixel_quadrature(mesh, cameras, points_per_px=1.0)
+    assert len(quad.element_blocks(2000)) > 3
+    view = reference_view(quad, mesh.nodes, pair(None), cameras, 0)
+    images = pair(RIGID)
+    U = RIGID(mesh.nodes)
+    res = displacement_residual(U, view, images, "element", jacobian=False)
+    X = view.X + quad.points(U)
+    for c in range(2):
+        m = res.mask[c]
+        g = np.where(m, images[c].evaluate(np.where(m[:, None], cameras[c].project(X), 0.0)), 0.0)
+        expected = np.zeros(quad.n_points)
+        scales = []
+        for values, dyn in ((view.f[c], view.dynamic_range[c]),
+                            (g, float(images[c].dynamic_range))):
+            seen = m.astype(float)
+            count = np.maximum(quad.element_sum(seen), 1.0)
+            mean = quad.element_sum(values * seen) / count
+            sd = np.sqrt(np.maximum(quad.element_sum(values ** 2 * seen) / count - mean ** 2, 0))
+            sd = np.maximum(sd, 0.005 * dyn)
+            scales.append(sd[quad.element])
+            expected = (values - mean[quad.element]) / sd[quad.element] - expected
+        np.testing.assert_allclose(res.r[c], np.where(m, -expected, 0.0), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res.sigma_ref[c], scales[0], rtol=1e-12)
