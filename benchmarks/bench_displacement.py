@@ -12,15 +12,21 @@ rest over the image scales (2, 1, 0):
 - twist: the same paint rendered flat, then on the twisted plate z = k x y (1 mm at the
   plate's corners, 0.56 mm at the mesh's): two independent renders, u = (0, 0, k x y).
 
-Printed per case and method (FE, Tikhonov of 10 mm on each component, georeg with 3
+``--jacobian current`` measures the table with the full Gauss-Newton instead of the default
+modified one. Printed per case and method (FE, Tikhonov of 10 mm on each component, georeg with 3
 spline levels per component): RMS error of the in-plane components (x and y pooled) and of
-the out-of-plane one at the nodes (um), and for the stretch the RMS error of the surface
-Green-Lagrange strain (E_xx, E_yy, E_xy pooled, microstrain); iterations and time.
+the out-of-plane one at the nodes (um), the RMS error of the surface Green-Lagrange strain
+(E_xx, E_yy, E_xy pooled, microstrain) at the nodes against the exact one, by the patch
+recovery (the default) and by the nodal average; iterations and time.
 Targets of the issue: <= 1 um in plane, <= 2 um out of plane, <= 100 microstrain.
 
-``--iteration``: one full-resolution Gauss-Newton iteration (assembly of H and b, sparse
-solve of the 3n dofs, the residual of both cameras with its derivative at the new state) at 2448 x 2048 px (5 Mpx) with 36 x 28 = 1008 Q9 elements; median of
-``--repeat``. Target of the issue: under 1.5 s on 2 cores.
+``--iteration``: one full-resolution Gauss-Newton iteration at 2448 x 2048 px (5 Mpx) with
+36 x 28 = 1008 Q9 elements, median of ``--repeat``: the modified Gauss-Newton (``jacobian =
+"reference"``, the default: ``b = J^T r``, back-substitution with the factor of the
+reference's H, the residual of both cameras at the new state), after the once-per-series
+reference and factorization (timed once), then the full one (``"current"``: assembly of H and
+b, sparse solve of the 3n dofs, the residual with its derivative at the new state). Target
+of the issue: under 1.5 s on 2 cores.
 
 ``--workers N [N ...]``: frames per minute of a series of ``--frames`` pairs of the accuracy
 scene (independent frames) serially and on a local Dask cluster of N worker processes
@@ -71,7 +77,7 @@ def _images(arrays, tag):
     return tuple(Image.from_array(a, source=f"{tag} cam{k}") for k, a in enumerate(arrays))
 
 
-def accuracy(levels: int, length_mm: float) -> None:
+def accuracy(levels: int, length_mm: float, jacobian: str = "reference") -> None:
     from fesdic_core.displacement import (DisplacementSettings, displacement_reference,
                                           measure_displacement)
     from fesdic_core.displacement_strain import surface_green_lagrange
@@ -104,17 +110,20 @@ def accuracy(levels: int, length_mm: float) -> None:
         frames[name] = _images(arrays, name)
     print(f"rendered 5 pairs of {SCENE['image_size'][0]} x {SCENE['image_size'][1]} px in "
           f"{time.perf_counter() - t:.0f} s; {mesh.n_nodes} nodes, {mesh.n_elements} Q9 elements")
-    settings = DisplacementSettings(scales=(2, 1, 0))
+    settings = DisplacementSettings(scales=(2, 1, 0), jacobian=jacobian)
     ref = displacement_reference(mesh, reference, cameras, settings)
+    print(f"Gauss-Newton: jacobian = {jacobian!r}")
     methods = {"FE": ("fe", {}), f"Tikhonov {length_mm:g} mm": ("tikhonov", {}),
                f"georeg {levels} levels": ("georeg", {})}
     print()
     print("| case | method | in-plane RMS (um) | out-of-plane RMS (um) | strain RMS (microstrain) "
-          "| iterations | time (s) | verdict |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| strain RMS, nodal average (microstrain) | iterations | time (s) | verdict |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, (motion, _) in cases.items():
         truth = motion(mesh.nodes)
-        strain_truth = surface_green_lagrange(mesh, truth)
+        # the exact strain at the nodes: Q9 holds every motion here, so the elements' own
+        # strain at their nodes is the closed form's (the recoveries are compared to it)
+        strain_truth = surface_green_lagrange(mesh, truth, recovery="nodal")
         for label, (method, _) in methods.items():
             solver = displacement_solver(method, mesh, model, length_mm, levels)
             t = time.perf_counter()
@@ -123,18 +132,22 @@ def accuracy(levels: int, length_mm: float) -> None:
             error = m.U - truth
             in_plane = 1e3 * np.sqrt(np.mean(error[:, :2] ** 2))
             out_of_plane = 1e3 * np.sqrt(np.mean(error[:, 2] ** 2))
-            strain = 1e6 * np.sqrt(np.mean((surface_green_lagrange(mesh, m.U) - strain_truth) ** 2))
+            strain, nodal = (1e6 * np.sqrt(np.mean((surface_green_lagrange(mesh, m.U, recovery)
+                                                    - strain_truth) ** 2))
+                             for recovery in ("patch", "nodal"))
             print(f"| {name} | {label} | {in_plane:.2f} | {out_of_plane:.2f} | {strain:.0f} | "
+                  f"{nodal:.0f} | "
                   f"{m.iterations} | {elapsed:.1f} | {'ok' if m.ok else 'FAILED: ' + m.failure} |")
     print(f"\n(max |u_z| of the twist at the nodes: {1e3 * np.abs(k * mesh.nodes[:, 0] * mesh.nodes[:, 1]).max():.0f} um)")
 
 
 def iteration(repeat: int) -> None:
     from fesdic_core.displacement import displacement_reference, DisplacementSettings
-    from fesdic_core.displacement_residual import displacement_operators, displacement_residual
+    from fesdic_core.displacement_residual import (displacement_operators, displacement_residual,
+                                                   displacement_rhs)
     from fesdic_core.mesh import rectangle_mesh
     from fesdic_core.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
-    from fesdic_core.solvers import sparse_solve
+    from fesdic_core.solvers import CachedFactorization, DirectSolver, sparse_solve
 
     cams = demo_cameras(image_size=(2448, 2048), stereo_angle_deg=25.0, field_mm=80.0)
     plate = flat_plate(90.0, 75.0, speckle_mm=speckle_mm_for(cams[0], 4.0), seed=1)
@@ -145,28 +158,65 @@ def iteration(repeat: int) -> None:
                                      progress=False), "deformed")
     print(f"rendered 2 pairs of 2448 x 2048 px in {time.perf_counter() - t:.0f} s")
     mesh = rectangle_mesh(72.0, 56.0, 36, 28, family="Q9")
+    t = time.perf_counter()
     ref = displacement_reference(mesh, reference, cams, DisplacementSettings(scales=(0,)))
+    t_ref = time.perf_counter() - t
     view = ref.view(0)
     U = np.zeros(3 * mesh.n_nodes)
     print(f"{view.quad.n_points} integration points, {mesh.n_elements} Q9 elements, "
           f"{3 * mesh.n_nodes} dofs")
+    # the modified Gauss-Newton (jacobian = "reference", the default): once per series and
+    # scale the reference (its Jacobian and H, in displacement_reference) and the
+    # factorization of H (the first solve); then an iteration is the residual of both
+    # cameras at the new state (no derivative), b = J^T r and a back-substitution
+    solver = CachedFactorization(DirectSolver())
+    t = time.perf_counter()
+    solver.solve(view.hessian, np.zeros(3 * mesh.n_nodes), U, 0)
+    t_factor = time.perf_counter() - t
+    print(f"\nonce per series (jacobian = 'reference'): reference state with its Jacobian and H "
+          f"{t_ref:.2f} s, factorization of H {t_factor:.2f} s")
+    res = displacement_residual(U, view, deformed, jacobian=False)
+
+    def modified(res):
+        b = displacement_rhs(view.quad, view.dr_du, res.r)
+        yield
+        d = solver.solve(view.hessian, b, U, 0)
+        yield
+        yield displacement_residual(U + d, view, deformed, jacobian=False)
+
+    _stages("reference", ("b = J^T r", "back-substitution (3n dofs)", "residual (no derivative)"),
+            modified, res, repeat)
     # one Gauss-Newton iteration as displacement_gauss_newton runs it: the operators of the
     # current residual, the solve, and the residual with its derivative at the new state
     # (which the next iteration's operators use)
-    res = displacement_residual(U, view, deformed)
-    stages = {"assembly of H, b": [], "sparse solve (3n dofs)": [],
-              "residual + derivative": [], "one iteration": []}
-    for _ in range(repeat):
-        t0 = time.perf_counter()
+    del view, ref, solver                                 # (memory: the full GN's own below)
+    ref = displacement_reference(mesh, reference, cams,
+                                 DisplacementSettings(scales=(0,), jacobian="current"))
+    view = ref.view(0)
+
+    def full(res):
         H, b = displacement_operators(view.quad, res)
-        t1 = time.perf_counter()
+        yield
         d = sparse_solve(H, b)
-        t2 = time.perf_counter()
-        res = displacement_residual(U + d, view, deformed)
-        t3 = time.perf_counter()
-        for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t3 - t0)):
+        yield
+        yield displacement_residual(U + d, view, deformed)
+
+    _stages("current", ("assembly of H, b", "sparse solve (3n dofs)", "residual + derivative"),
+            full, displacement_residual(U, view, deformed), repeat)
+
+
+def _stages(jacobian: str, names, iteration, res, repeat: int) -> None:
+    """Median times of the three stages of ``iteration(res)`` (a generator that yields after
+    each stage, the new residual last) and of the whole, over ``repeat`` iterations."""
+    stages = {name: [] for name in (*names, "one iteration")}
+    for _ in range(repeat):
+        times = [time.perf_counter()]
+        for res in iteration(res):
+            times.append(time.perf_counter())
+        for key, dt in zip(stages, (*np.diff(times), times[-1] - times[0])):
             stages[key].append(dt)
-    print(f"\nmedian of {repeat} (threads: FESDIC_THREADS={os.environ.get('FESDIC_THREADS', 'default')}):")
+    print(f"median of {repeat} (threads: FESDIC_THREADS={os.environ.get('FESDIC_THREADS', 'default')}), "
+          f"jacobian = {jacobian!r}:")
     for key, times in stages.items():
         print(f"  {key:28s} {statistics.median(times):7.3f} s")
 
@@ -230,10 +280,12 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--levels", type=int, default=3)
     parser.add_argument("--tikhonov-mm", type=float, default=10.0)
+    parser.add_argument("--jacobian", choices=("reference", "current"), default="reference",
+                        help="the accuracy table's Gauss-Newton (default: reference)")
     args = parser.parse_args()
     print(f"machine: {_machine()}")
     if not (args.iteration or args.workers is not None) or args.accuracy:
-        accuracy(args.levels, args.tikhonov_mm)
+        accuracy(args.levels, args.tikhonov_mm, args.jacobian)
     if args.iteration:
         iteration(args.repeat)
     if args.workers is not None:

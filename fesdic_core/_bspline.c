@@ -1,4 +1,5 @@
-/* Fused evaluation of a bicubic B-spline image interpolant: value and exact gradient.
+/* Fused evaluation of a bicubic B-spline image interpolant: value and exact gradient
+ * (or the value alone: ``grad`` NULL, half the arithmetic).
  *
  * The compiled twin of fesdic_core.image._evaluate_numpy (same arithmetic, one pass per
  * point, the 4x4 coefficient support read row by row from a padded coefficient array).
@@ -47,7 +48,8 @@ static void evaluate(const double *padded, Py_ssize_t h, Py_ssize_t w, Py_ssize_
     for (Py_ssize_t k = 0; k < n; ++k) {
         const double x = xy[2 * k], y = xy[2 * k + 1];
         if (!isfinite(x) || !isfinite(y)) {
-            value[k] = grad[2 * k] = grad[2 * k + 1] = NAN;
+            value[k] = NAN;
+            if (grad) grad[2 * k] = grad[2 * k + 1] = NAN;
             continue;
         }
         double sx, sy, wx[4], dwx[4], wy[4], dwy[4];
@@ -57,6 +59,12 @@ static void evaluate(const double *padded, Py_ssize_t h, Py_ssize_t w, Py_ssize_
         cubic_weights(yf - i, wy, dwy);
         const double *c = padded + ((Py_ssize_t)i + pad - 1) * pw + (Py_ssize_t)j + pad - 1;
         double v = 0.0, gx = 0.0, gy = 0.0;
+        if (!grad) {
+            for (int a = 0; a < 4; ++a, c += pw)
+                v += wy[a] * (c[0] * wx[0] + c[1] * wx[1] + c[2] * wx[2] + c[3] * wx[3]);
+            value[k] = v;
+            continue;
+        }
         for (int a = 0; a < 4; ++a, c += pw) {
             const double cx = c[0] * wx[0] + c[1] * wx[1] + c[2] * wx[2] + c[3] * wx[3];
             const double cdx = c[0] * dwx[0] + c[1] * dwx[1] + c[2] * dwx[2] + c[3] * dwx[3];
@@ -72,10 +80,18 @@ static void evaluate(const double *padded, Py_ssize_t h, Py_ssize_t w, Py_ssize_
 
 static PyObject *py_evaluate(PyObject *self, PyObject *args)
 {
-    Py_buffer padded, xy, value, grad;
+    Py_buffer padded, xy, value, grad = {0};
     Py_ssize_t h, w, pad;
-    if (!PyArg_ParseTuple(args, "y*nnny*w*w*", &padded, &h, &w, &pad, &xy, &value, &grad))
+    PyObject *grad_object;
+    if (!PyArg_ParseTuple(args, "y*nnny*w*O", &padded, &h, &w, &pad, &xy, &value, &grad_object))
         return NULL;
+    const int with_grad = grad_object != Py_None;
+    if (with_grad && PyObject_GetBuffer(grad_object, &grad, PyBUF_WRITABLE) < 0) {
+        PyBuffer_Release(&padded);
+        PyBuffer_Release(&xy);
+        PyBuffer_Release(&value);
+        return NULL;
+    }
     PyObject *result = NULL;
     const Py_ssize_t n = xy.len / (Py_ssize_t)(2 * sizeof(double));
     if (h < 1 || w < 1 || pad < 2) {
@@ -84,12 +100,12 @@ static PyObject *py_evaluate(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "_bspline.evaluate: padded coefficients of the wrong size");
     } else if (xy.len % (Py_ssize_t)(2 * sizeof(double)) != 0
                || value.len != (Py_ssize_t)sizeof(double) * n
-               || grad.len != (Py_ssize_t)(2 * sizeof(double)) * n) {
+               || (with_grad && grad.len != (Py_ssize_t)(2 * sizeof(double)) * n)) {
         PyErr_SetString(PyExc_ValueError, "_bspline.evaluate: xy (n, 2), value (n,), grad (n, 2) mismatch");
     } else {
         Py_BEGIN_ALLOW_THREADS
         evaluate((const double *)padded.buf, h, w, pad, (const double *)xy.buf, n,
-                 (double *)value.buf, (double *)grad.buf);
+                 (double *)value.buf, with_grad ? (double *)grad.buf : NULL);
         Py_END_ALLOW_THREADS
         result = Py_None;
         Py_INCREF(result);
@@ -97,14 +113,15 @@ static PyObject *py_evaluate(PyObject *self, PyObject *args)
     PyBuffer_Release(&padded);
     PyBuffer_Release(&xy);
     PyBuffer_Release(&value);
-    PyBuffer_Release(&grad);
+    if (with_grad)
+        PyBuffer_Release(&grad);
     return result;
 }
 
 static PyMethodDef methods[] = {
     {"evaluate", py_evaluate, METH_VARARGS,
      "evaluate(padded, h, w, pad, xy, value, grad): bicubic B-spline value and gradient "
-     "(C-contiguous float64 buffers; value and grad are written)."},
+     "(C-contiguous float64 buffers; value and grad are written; grad None: the value only)."},
     {NULL, NULL, 0, NULL}};
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_bspline",

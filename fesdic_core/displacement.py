@@ -13,6 +13,17 @@ of the shape (:mod:`fesdic_core.damping`): the residual never grows. The referen
 scale (quadrature, reference gray levels) is computed once (:func:`displacement_reference`)
 and serves every frame of a series.
 
+By default (``jacobian = "reference"``) the Gauss-Newton is the modified one of FE-DIC
+(Besnard, Hild and Roux 2006): the derivative of the residual is taken from the reference
+images at the reference points (:func:`~fesdic_core.displacement_residual.reference_jacobian`),
+so ``H`` of each scale is built once with the reference and factorized once per process
+(:class:`~fesdic_core.solvers.CachedFactorization` over the solver's ``factorize``); an
+iteration is the deformed images' residual, ``b = J^T r`` and a back-substitution. The
+residual, hence the solution, is the full Gauss-Newton's (``jacobian = "current"``: the
+deformed images' derivative at the current state, ``H`` rebuilt at every iteration); only the
+path to it differs (the Jacobian ignores the displacement gradient, the contrast change and the
+change of each camera's projection derivative, all small where DIC works).
+
 A displacement is trusted only if, at the finest scale, the residual is consistent with the
 images' noise, the deformed images show texture, the field stayed bounded and the
 Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`).
@@ -27,22 +38,26 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .damping import damped_step, relaxed
-from .displacement_residual import (DisplacementResidual, ReferenceView, chi_square_change,
+from .displacement_residual import (DisplacementResidual, ReferenceView, chi_square,
                                     displacement_operators, displacement_residual,
-                                    reference_view)
+                                    displacement_rhs, reference_view)
 from .driver import (MeasurementInputError, MeasurementSettings, ScaleReport, check_inputs,
                      check_scales, judge)
 from .image import Image, pyramid
 from .mesh import SurfaceMesh
 from .noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
 from .quadrature import pixel_quadrature
-from .shape import GaussNewtonLog, damped
-from .solvers import DirectSolver, StepSolver
+from .gauss_newton import damped_gauss_newton
+from .shape import GaussNewtonLog
+from .solvers import CachedFactorization, DirectSolver, StepSolver
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
+#: the Jacobian of the displacement's Gauss-Newton: the reference images' (modified
+#: Gauss-Newton, H once per scale) or the deformed images' at the current state (full)
+JACOBIANS = ("reference", "current")
+
+__all__ = ["JACOBIANS", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
            "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
            "measure_displacement", "displacement_verdict"]
 
@@ -58,6 +73,11 @@ class DisplacementSettings:
     consistency_factor : the final residual may be at most this many times the noise floor.
     max_shape_fraction : the displacement may reach at most this fraction of the reference
         surface's diagonal (the name :func:`driver.judge` reads); more is a divergence.
+    jacobian : "reference" (default): the modified Gauss-Newton, the Jacobian of the reference
+        images at the reference points, so ``H`` is built and factorized once per scale and
+        serves every iteration of every frame; "current": the full Gauss-Newton, the
+        deformed images' Jacobian at the current state, ``H`` rebuilt at every iteration.
+        Both minimise the same residual (same solution); only the convergence path differs.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -69,10 +89,13 @@ class DisplacementSettings:
     points_per_px: float = 1.0
     consistency_factor: float = CONSISTENCY_FACTOR
     max_shape_fraction: float = 0.25
+    jacobian: str = "reference"
 
     def __post_init__(self):
         # the shape's checks of the scales and the normalisation (ValueError naming them)
         MeasurementSettings(scales=self.scales, normalisation=self.normalisation)
+        if self.jacobian not in JACOBIANS:
+            raise ValueError(f"jacobian must be one of {JACOBIANS}, got {self.jacobian!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,7 +129,9 @@ def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: 
     for scale in settings.scales:
         scaled = [c.scaled(scale) for c in cameras]
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px)
-        views.append(reference_view(quad, mesh.nodes, [p[scale] for p in pyramids], scaled, scale))
+        normalisation = settings.normalisation if settings.jacobian == "reference" else None
+        views.append(reference_view(quad, mesh.nodes, [p[scale] for p in pyramids], scaled, scale,
+                                    normalisation=normalisation))
     return DisplacementReference(mesh=mesh, cameras=tuple(cameras), images=tuple(images),
                                  views=tuple(views), settings=settings)
 
@@ -128,60 +153,54 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
                               max_iter: int = 30, tol_mm: float = 1e-4, max_damping: int = 8,
                               residual_rtol: float | None = None,
                               log: GaussNewtonLog | None = None,
-                              context: dict | None = None) -> DisplacementGNResult:
+                              context: dict | None = None,
+                              jacobian: str = "current") -> DisplacementGNResult:
     """Minimise both cameras' residual over ``U`` (n, 3) at one scale, steps by ``solver``.
 
-    As :func:`fesdic_core.shape.shape_gauss_newton`: Levenberg-Marquardt guard, convergence
-    when the accepted step is below ``tol_mm`` (largest component), when it changes the fit
-    by less than one unit of chi-square, or when no damped step lowers the residual;
-    ``residual_rtol`` also stops a coarse scale whose residual stagnates.
+    The loop of the shape (:func:`fesdic_core.gauss_newton.damped_gauss_newton`):
+    Levenberg-Marquardt guard, convergence when the step is below ``tol_mm`` (largest
+    component; the plain step is tested before the images are evaluated at its end), when it
+    changes the fit by less than one unit of chi-square, or when no damped step lowers the
+    residual; ``residual_rtol`` also stops a coarse scale whose residual stagnates.
+
+    ``jacobian``: "current" (full Gauss-Newton: ``H`` and ``b`` from the deformed images'
+    derivative at ``U``, every iteration) or "reference" (modified Gauss-Newton: the view's
+    constant ``H``, the same object at every call so that a :class:`CachedFactorization`
+    solver factorizes it once, and ``b = J^T r`` from :attr:`ReferenceView.dr_du`).
     """
     quad, scale = ref.quad, ref.scale
+    if jacobian not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
+    frozen = jacobian == "reference"
+    if frozen and ref.hessian is None:
+        raise ValueError("jacobian = 'reference' needs a reference view with its Jacobian "
+                         "(displacement_reference with DisplacementSettings(jacobian='reference'))")
 
-    def evaluate(U: np.ndarray, jacobian: bool) -> DisplacementResidual:
-        return displacement_residual(U, ref, images, normalisation, jacobian)
+    def evaluate(U: np.ndarray) -> DisplacementResidual:
+        return displacement_residual(U, ref, images, normalisation, not frozen)
 
-    U = np.asarray(U0, float).reshape(-1).copy()
-    res = evaluate(U, True)
-    mu, converged, it, stop = 0.0, False, 0, "iteration limit"
-    for it in range(1, max_iter + 1):
-        std = res.std_percent
-        if not np.isfinite(std):
-            logger.warning("displacement GN scale %d: no integration point is seen", scale)
-            stop = "no point seen"
-            break
-        H, b = displacement_operators(quad, res)
+    def operators(res: DisplacementResidual):
+        if frozen:                                   # the same H object at every iteration
+            return ref.hessian, displacement_rhs(quad, ref.dr_du, res.r)
+        return displacement_operators(quad, res)
 
-        def propose(mu: float):
-            d = np.asarray(solver.solve(damped(H, mu), b, U, scale), float)
-            return (d, evaluate(U + d, True)) if np.all(np.isfinite(d)) else None
-
-        accepted, mu = damped_step(propose, std, mu, max_damping)
-        if accepted is None:
-            converged, stop = True, "no descent"
-            break
-        d, trial = accepted
-        change = chi_square_change(res, trial, quad)
-        U, res = U + d, trial
-        step = float(np.max(np.abs(d))) if d.size else 0.0
+    def on_step(it: int, std: float, res: DisplacementResidual, step: float, mu: float) -> None:
         if log is not None:
             log.add(**(context or {}), scale=scale, stage="displacement", iteration=it,
                     residual_percent=res.std_percent, step=step, damping=mu,
                     n_points=res.n_points)
         logger.debug("displacement GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, "
                      "mu %.1e", scale, it, std, res.std_percent, step, mu)
-        mu = relaxed(mu)
-        if step < tol_mm:
-            converged, stop = True, "step"
-            break
-        if abs(change) < 1.0:
-            converged, stop = True, "noise"
-            break
-        if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
-            converged, stop = True, "residual"
-            break
-    return DisplacementGNResult(U=U.reshape(-1, 3), residual=dataclasses.replace(res, dr_du=None),
-                                iterations=it, converged=converged, damping=mu, stop=stop)
+
+    U = np.asarray(U0, float).reshape(-1)
+    out = damped_gauss_newton(U, evaluate(U), evaluate, operators,
+                              lambda H, b, U: solver.solve(H, b, U, scale),
+                              lambda res: chi_square(res, quad), tol_mm, max_iter, max_damping,
+                              residual_rtol, on_step, f"displacement GN scale {scale}")
+    return DisplacementGNResult(U=out.q.reshape(-1, 3),
+                                residual=dataclasses.replace(out.residual, dr_du=None),
+                                iterations=out.iterations, converged=out.converged,
+                                damping=out.damping, stop=out.stop)
 
 
 @dataclass(frozen=True)
@@ -290,6 +309,8 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     _check_frame(images, reference)
     settings = reference.settings
     solver = DirectSolver() if solver is None else solver
+    if settings.jacobian == "reference" and not isinstance(solver, CachedFactorization):
+        solver = CachedFactorization(solver)             # H of each scale factorized once
     n = reference.mesh.n_nodes
     U = np.zeros((n, 3)) if U0 is None else np.asarray(U0, float).reshape(n, 3).copy()
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
@@ -297,14 +318,14 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     reports, total_iterations, gn, noise_percent, ratios = [], 0, None, float("nan"), [np.inf] * 2
     for k, scale in enumerate(settings.scales, start=1):
         view, imgs = reference.view(scale), [p[scale] for p in pyramids]
-        if callable(getattr(solver, "start_scale", None)):
+        if callable(getattr(solver, "start_scale", None)):      # (not a CachedFactorization)
             solver.start_scale(scale, None)
         finest = scale == settings.scales[-1]
         gn = displacement_gauss_newton(U, view, imgs, solver, settings.normalisation,
                                        settings.max_iter, settings.tol_mm * 2.0 ** scale,
                                        settings.max_damping,
                                        residual_rtol=None if finest else settings.residual_rtol,
-                                       log=log)
+                                       log=log, jacobian=settings.jacobian)
         U, total_iterations = gn.U, total_iterations + gn.iterations
         noise_percent, ratios = _noise_floor(view, gn.residual, imgs)
         report = ScaleReport(scale=scale, residual_percent=gn.residual.std_percent,

@@ -28,7 +28,8 @@ extraction operator ``C_s``, a Tikhonov ``A``) acts on every component through
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -39,8 +40,8 @@ from .parallel import for_each_block, for_each_span
 from .quadrature import PixelQuadrature
 from .residual import NORMALISATIONS
 
-__all__ = ["ReferenceView", "DisplacementResidual", "reference_view", "displacement_residual",
-           "displacement_operators", "component_dofs"]
+__all__ = ["ReferenceView", "DisplacementResidual", "reference_view", "reference_jacobian",
+           "displacement_residual", "displacement_operators", "displacement_rhs", "component_dofs"]
 
 _SIGMA_FLOOR = 0.005   # fraction of the dynamic range below which an element is "uniform"
 _BLOCK = 1 << 15       # points per block of whole elements (temporaries stay in cache)
@@ -59,6 +60,9 @@ class ReferenceView:
     images : the two reference images at this scale
     f : (2, g) reference gray levels of each camera at its projected points
     seen : (2, g) bool, point in front of the camera and inside its reference image
+    dr_du : (2, g, 3) float32 ``w_g dr_c/du_g`` of the reference (:func:`reference_jacobian`,
+        weights folded in), or None (the full Gauss-Newton's derivative at the current state)
+    hessian : (3n, 3n) csr ``H`` of :attr:`dr_du` (:func:`displacement_operators`), or None
     """
 
     scale: int
@@ -68,6 +72,8 @@ class ReferenceView:
     images: tuple
     f: np.ndarray
     seen: np.ndarray
+    dr_du: np.ndarray | None = field(default=None, repr=False)
+    hessian: sps.csr_matrix | None = field(default=None, repr=False)
 
     @property
     def dynamic_range(self) -> np.ndarray:
@@ -76,20 +82,61 @@ class ReferenceView:
 
 
 def reference_view(quad: PixelQuadrature, nodes: np.ndarray, images: Sequence, cameras: Sequence,
-                   scale: int, extra_mask: np.ndarray | None = None) -> ReferenceView:
-    """Sample each reference image at the projection of the reference points ``L^T X_I``."""
+                   scale: int, extra_mask: np.ndarray | None = None,
+                   normalisation: str | None = None) -> ReferenceView:
+    """Sample each reference image at the projection of the reference points ``L^T X_I``.
+
+    With ``normalisation`` (the residual's), also the reference Jacobian and its ``H``
+    (:func:`reference_jacobian`): the modified Gauss-Newton's constant operator.
+    """
     X = quad.points(nodes)
     f = np.zeros((2, len(X)))
+    pull = None if normalisation is None else np.zeros((2, len(X), 3))
     seen = np.ones((2, len(X)), dtype=bool) if extra_mask is None else \
         np.tile(np.asarray(extra_mask, bool), (2, 1))
     for c, (image, cam) in enumerate(zip(images, cameras)):
-        x = cam.project(X)
+        x, lin = cam.linearise(X)
         with np.errstate(invalid="ignore"):
             seen[c] &= cam.in_front(X) & image.inside(x)
         x[~seen[c]] = 0.0
-        f[c] = np.where(seen[c], image.evaluate(x), 0.0)
-    return ReferenceView(scale=int(scale), quad=quad, X=X, cameras=tuple(cameras),
+        if pull is None:
+            f[c] = np.where(seen[c], image.evaluate(x), 0.0)
+        else:
+            value, grad = image.evaluate_with_gradient(x)
+            f[c] = np.where(seen[c], value, 0.0)
+            pull[c] = lin.pull_point(grad)                              # J_c^T grad f_c
+    view = ReferenceView(scale=int(scale), quad=quad, X=X, cameras=tuple(cameras),
                          images=tuple(images), f=f, seen=seen)
+    return view if pull is None else reference_jacobian(view, pull, normalisation)
+
+
+def reference_jacobian(view: ReferenceView, pull: np.ndarray, normalisation: str
+                       ) -> ReferenceView:
+    """The view with the modified Gauss-Newton's Jacobian and its operator ``H``.
+
+    At the solution ``g_c(P_c(X_g + u_g)) ~= a f_c(P_c(X_g)) + b`` (the deformed image is
+    the reference one moved, up to the brightness and contrast the normalisation removes),
+    so the derivative of the residual is, up to the displacement gradient,
+
+        dr_c/du_g = -J_c(X_g)^T grad f_c / s_c,
+
+    with the reference image's gradient and contrast ``s_c`` at the reference points
+    (``pull``: (2, g, 3) ``J_c^T grad f_c``): the classic FE-DIC modified Gauss-Newton
+    (Besnard, Hild and Roux 2006). ``H`` is assembled once per scale and serves every
+    iteration of every frame; the residual (hence the solution) is unchanged.
+    """
+    quad, dyn = view.quad, view.dynamic_range
+    G = np.zeros(pull.shape)
+    for c in range(2):
+        _, s0 = _element_statistics(view.f[c], view.seen[c], quad, dyn[c], normalisation)
+        G[c] = pull[c] * np.where(view.seen[c], -1.0 / s0, 0.0)[:, None]
+    frozen = DisplacementResidual(r=np.zeros(view.f.shape), mask=view.seen, dr_du=G,
+                                  sigma_ref=np.ones(view.f.shape), dynamic_range=dyn,
+                                  std_percent=float("nan"))
+    H, _ = displacement_operators(quad, frozen)
+    w = np.where(view.seen, quad.weight_mm2, 0.0)
+    wG = (G * w[:, :, None]).astype(np.float32)
+    return dataclasses.replace(view, dr_du=wG, hessian=H)
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,18 +192,23 @@ def _element_statistics(values: np.ndarray, mask: np.ndarray, quad: PixelQuadrat
     g = len(values)
     if normalisation == "none":
         return np.zeros(g), np.ones(g)
+    starts = quad.element_runs[0] if normalisation == "element" else np.zeros(1, dtype=np.intp)
+    return _run_statistics(values, mask, starts, _SIGMA_FLOOR * dynamic_range)
+
+
+def _run_statistics(values: np.ndarray, mask: np.ndarray, starts: np.ndarray, floor: float
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation (g,) of ``values`` over the ``mask``-ed points of each run
+    of points (runs from ``starts``, increasing, the first 0: an element's points are a
+    run), at every point of the run; deviations floored at ``floor``."""
     seen = mask.astype(float)
     fm = values * seen
-    moments = np.stack([quad.element_sum(seen), quad.element_sum(fm), quad.element_sum(fm * values)])
-    if normalisation == "global":
-        moments = moments.sum(axis=1, keepdims=True)
-    count = np.maximum(moments[0], 1.0)
-    mean = moments[1] / count
-    sigma = np.maximum(np.sqrt(np.maximum(moments[2] / count - mean ** 2, 0.0)),
-                       _SIGMA_FLOOR * dynamic_range)
-    if normalisation == "global":
-        return np.full(g, mean[0]), np.full(g, sigma[0])
-    return mean[quad.element], sigma[quad.element]
+    count = np.maximum(np.add.reduceat(seen, starts), 1.0)
+    mean = np.add.reduceat(fm, starts) / count
+    sigma = np.maximum(np.sqrt(np.maximum(np.add.reduceat(fm * values, starts) / count
+                                          - mean ** 2, 0.0)), floor)
+    lengths = np.diff(np.append(starts, len(values)))
+    return np.repeat(mean, lengths), np.repeat(sigma, lengths)
 
 
 def _pooled_percent(percent: np.ndarray, mask: np.ndarray) -> float:
@@ -184,33 +236,42 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
     mask = ref.seen.copy()
     value = np.zeros((2, g))
     pull = np.zeros((2, g, 3)) if jacobian else None
+    r, sigma_ref = np.zeros((2, g)), np.empty((2, g))
+    dyn = ref.dynamic_range
     blocks = quad.element_blocks(_BLOCK)
+    run_starts = quad.element_runs[0]
+
+    def normalise(c: int, span: slice, statistics) -> None:
+        """Remark 2 on the points ``span`` of camera ``c``: the residual and its scales."""
+        m, f, v = mask[c, span], ref.f[c, span], value[c, span]
+        mean0, s0 = statistics(f, m, dyn[c])
+        mean1, s1 = statistics(v, m, float(images[c].dynamic_range))
+        r[c, span] = np.where(m, (f - mean0) / s0 - (v - mean1) / s1, 0.0)
+        sigma_ref[c, span] = s0
+        if jacobian:
+            pull[c, span] *= np.where(m, -1.0 / s1, 0.0)[:, None]  # dr_c/du = -J^T grad g / s'
 
     def sample(i: int) -> None:
-        b = blocks[i][0]
+        b, runs = blocks[i]
         for c, (image, cam) in enumerate(zip(images, ref.cameras)):
             x, lin = cam.linearise(X[b])
             with np.errstate(invalid="ignore"):
                 mask[c, b] &= (lin.inv_z > 0.0) & image.inside(x)
             x[~mask[c, b]] = 0.0                                  # keep unseen points harmless
-            v, grad = image.evaluate_with_gradient(x)
-            value[c, b] = v
             if jacobian:
+                value[c, b], grad = image.evaluate_with_gradient(x)
                 pull[c, b] = lin.pull_point(grad)                  # J_c^T grad g_c
+            else:
+                value[c, b] = image.evaluate(x)                   # (the value-only pass)
+            if normalisation == "element":                        # the block's whole elements
+                starts = run_starts[runs] - b.start
+                normalise(c, b, lambda v, m, d: _run_statistics(v, m, starts, _SIGMA_FLOOR * d))
 
     for_each_span(sample, len(blocks))
-    r = np.zeros((2, g))
-    sigma_ref = np.ones((2, g))
-    dyn = ref.dynamic_range
-    for c in range(2):
-        m = mask[c]
-        mean0, s0 = _element_statistics(ref.f[c], m, quad, dyn[c], normalisation)
-        mean1, s1 = _element_statistics(value[c], m, quad, float(images[c].dynamic_range),
-                                        normalisation)
-        r[c] = np.where(m, (ref.f[c] - mean0) / s0 - (value[c] - mean1) / s1, 0.0)   # Remark 2
-        sigma_ref[c] = s0
-        if jacobian:
-            pull[c] *= np.where(m, -1.0 / s1, 0.0)[:, None]       # dr_c/du = -J^T grad g / s'
+    if normalisation != "element":                                # over the whole region
+        for c in range(2):
+            normalise(c, slice(None),
+                      lambda v, m, d: _element_statistics(v, m, quad, d, normalisation))
     gray = 100.0 * r * sigma_ref / dyn[:, None]
     return DisplacementResidual(r=r, mask=mask, dr_du=pull, sigma_ref=sigma_ref,
                                 dynamic_range=dyn, std_percent=_pooled_percent(gray, mask))
@@ -276,16 +337,38 @@ def displacement_operators(quad: PixelQuadrature, res: DisplacementResidual
     return assemble(dofs, element_matrices, n), b
 
 
+def displacement_rhs(quad: PixelQuadrature, weighted_dr_du: np.ndarray, r: np.ndarray
+                     ) -> np.ndarray:
+    """``b`` (3n,) of a Gauss-Newton step for a Jacobian given with its weights folded in,
+    ``wG_cg = w_g dr_c/du_g`` (:attr:`ReferenceView.dr_du`), and residuals ``r`` (2, g)
+    (0 at the points not seen):
+
+        b[3 i + k] = -sum_g L_i(xi_g) sum_c r_cg wG_cg[k]     (b of Eq. 8, J^T r),
+
+    the gather of :func:`displacement_operators`'s ``b`` without its element blocks of H.
+    """
+    n = 3 * quad.n_nodes
+    b = np.zeros(n)
+    for group in quad.groups:
+        E, (m, nn) = len(group.elements), group.N.shape
+        be = np.empty((E, nn, 3))
+
+        def element_block(span: slice) -> None:
+            points = slice(group.start + span.start * m, group.start + span.stop * m)
+            B = np.einsum("cp,cpk->pk", r[:, points], weighted_dr_du[:, points],
+                          dtype=float, casting="same_kind")                      # (p, 3)
+            e = span.stop - span.start
+            Bm = B.reshape(e, m, 3).transpose(1, 0, 2).reshape(m, e * 3)
+            be[span] = -np.einsum("mi,mj->ij", group.N, Bm).reshape(nn, e, 3).transpose(1, 0, 2)
+
+        for_each_block(element_block, E, max(1, _OPERATOR_BLOCK // m))
+        b += np.bincount(component_dofs(group.connectivity).ravel(), weights=be.ravel(),
+                         minlength=n)
+    return b
+
+
 def chi_square(res: DisplacementResidual, quad: PixelQuadrature) -> tuple[float, int]:
     """The cost ``sum_c sum_g w_g r_c**2`` and the number of (point, camera) pairs seen."""
     w = np.where(res.mask, quad.weight_mm2, 0.0)
     return float(np.sum(w * res.r * res.r)), res.n_points
 
-
-def chi_square_change(before: DisplacementResidual, after: DisplacementResidual,
-                      quad: PixelQuadrature) -> float:
-    """How much a step improved the fit in units of chi-square (as
-    :func:`fesdic_core.shape.chi_square_change`): below 1 the data cannot tell them apart."""
-    c0, n = chi_square(before, quad)
-    c1, _ = chi_square(after, quad)
-    return (c0 - c1) * n / c0 if c0 > 0.0 and n else float("inf")

@@ -9,12 +9,13 @@ of Eq. 10 (:class:`ComponentTikhonovSolver`). The Gauss-Newton of
 from __future__ import annotations
 
 import logging
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sps
 
 from .mesh import SurfaceMesh
-from .solvers import sparse_solve
+from .solvers import sparse_factor, sparse_solve
 from .tikhonov import surface_gradient_operator, tikhonov_weight
 
 logger = logging.getLogger(__name__)
@@ -71,6 +72,18 @@ class ComponentTikhonovSolver:
     def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         scale = int(scale)
         self.start_scale(scale)
+        A3 = self._choose(H, scale)
+        return sparse_solve(H + A3, b - A3 @ q, what="H + A3")            # Eq. 10
+
+    def factorize(self, H: sps.spmatrix, scale: int) -> Callable:
+        """``(b, q) -> (H + A3)^-1 (b - A3 q)`` with ``H + A3`` factorized once (the weights
+        of the scale chosen from ``H`` if not yet)."""
+        A3 = self._choose(H, int(scale))
+        solve = sparse_factor(H + A3, what="H + A3")
+        return lambda b, q: solve(b - A3 @ q)                             # Eq. 10
+
+    def _choose(self, H: sps.spmatrix, scale: int) -> sps.csr_matrix:
+        """``A3`` of ``scale``, its weights chosen from ``H`` at the scale's first step."""
         if scale not in self.component_lambdas:
             length = self.length_mm * 2.0 ** scale                       # Remark 3
             H = sps.csr_matrix(H)
@@ -78,8 +91,7 @@ class ComponentTikhonovSolver:
                 [tikhonov_weight(H[k::3, k::3], self.A, self.nodes, length) for k in range(3)])
             logger.info("tikhonov (per component) scale %d: length %.4g mm, lambda %s", scale,
                         length, np.array2string(self.component_lambdas[scale], precision=4))
-        A3 = self.operator(scale)
-        return sparse_solve(H + A3, b - A3 @ q, what="H + A3")            # Eq. 10
+        return self.operator(scale)
 
     def __repr__(self) -> str:
         return f"ComponentTikhonovSolver(length_mm={self.length_mm!r})"

@@ -234,10 +234,24 @@ class Image:
         return self.values.shape
 
     def evaluate(self, xy: np.ndarray) -> np.ndarray:
-        """Gray levels of the model (prefiltered, interpolated) at ``xy`` (n, 2) = (x, y); returns (n,)."""
+        """Gray levels of the model (prefiltered, interpolated) at ``xy`` (n, 2) = (x, y); returns (n,).
+
+        The compiled kernel's value-only pass (the value of :meth:`evaluate_with_gradient`
+        without its gradient), else scipy's :func:`map_coordinates` (the same interpolant).
+        """
         xy = _xy(xy)
-        return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=3,
-                                       mode="mirror", prefilter=False)
+        if _bspline is None:
+            return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=3,
+                                           mode="mirror", prefilter=False)
+        xy = np.ascontiguousarray(xy)
+        h, w = self.values.shape
+        value = np.empty(len(xy))
+
+        def run(block: slice) -> None:
+            _bspline.evaluate(self._padded, h, w, _PAD, xy[block], value[block], None)
+
+        for_each_block(run, len(xy), _PARALLEL_BLOCK)
+        return value
 
     def evaluate_with_gradient(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gray levels (n,) and exact spline gradient (n, 2) = [d/dx, d/dy] at ``xy`` (n, 2).

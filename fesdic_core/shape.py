@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sps
 
-from .damping import damped_step, relaxed
+from .gauss_newton import damped_gauss_newton, predicted_change
 from .mesh import assemble
 from .parallel import for_each_block
 from .quadrature import PixelQuadrature
@@ -99,13 +99,6 @@ class ShapeResult:
     stop: str = ""
 
 
-def damped(H: sps.spmatrix, mu: float) -> sps.spmatrix:
-    """Levenberg-Marquardt matrix ``H + mu diag(H)`` (Marquardt's scaling; ``mu = 0``: H)."""
-    if mu == 0.0:
-        return H
-    return (H + mu * sps.diags(H.diagonal())).tocsr()
-
-
 def chi_square(res: GrayLevelResidual, quad: PixelQuadrature) -> tuple[float, int]:
     """The cost ``c = sum_g w_g r_g**2`` of Eq. 7 and the number of points seen."""
     w = np.where(res.mask, quad.weight_mm2, 0.0)
@@ -137,9 +130,7 @@ def predicted_chi_square_change(H, b: np.ndarray, d: np.ndarray, res: GrayLevelR
     the predicted fall is ``2 d.b - d.H d`` (``d.b`` for the Gauss-Newton step of any
     Galerkin projection, e.g. a spline level); divided by ``c / n``.
     """
-    c, n = chi_square(res, quad)
-    fall = 2.0 * float(d @ b) - float(d @ (H @ d))
-    return fall * n / c if c > 0.0 and n else float("inf")
+    return predicted_change(H, b, d, chi_square(res, quad))
 
 
 def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
@@ -164,7 +155,9 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     images are evaluated at its end (its size, and the fall of chi-square the linearised
     model predicts, :func:`predicted_chi_square_change`): a stagnant step is not taken, and
     the iteration that would only have confirmed it costs no residual evaluation; an
-    accepted step is tested again with its actual change (:func:`chi_square_change`).
+    accepted step is tested again with its actual change (:func:`chi_square_change`). The
+    loop is :func:`fesdic_core.gauss_newton.damped_gauss_newton`, shared with the
+    displacement.
     ``residual_rtol`` (for the coarse scales of a multiscale run, which only start the next
     scale, Remark 3) also stops it when the residual falls by less than that fraction in a
     step. ``max_iter`` reached first leaves ``converged=False``. ``start``: the residual at
@@ -176,50 +169,7 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         X = quad.points(current_nodes(nodes0, normals, q))
         return gray_level_residual(X, quad, images, cameras, normalisation, "point", extra_mask)
 
-    q = np.asarray(q0, float).copy()
-    res = evaluate(q) if start is None or start.dr_dX is None else start
-    mu, converged, it, stop = 0.0, False, 0, "iteration limit"
-    for it in range(1, max_iter + 1):
-        std = res.std_percent
-        if not np.isfinite(std):                     # no point seen: nothing to measure
-            logger.warning("shape GN scale %d: no integration point is seen by both cameras", scale)
-            break
-        H, b = shape_operators(quad, normals, res)
-        plain = solver.solve(H, b, q, scale)                    # the Gauss-Newton step, Eq. 8
-        if np.all(np.isfinite(plain)):
-            step = float(np.max(np.abs(plain))) if plain.size else 0.0
-            stagnant = ("step" if step < tol_mm else "noise"
-                        if abs(predicted_chi_square_change(H, b, plain, res, quad)) < 1.0
-                        else None)
-            if stagnant is not None:                       # q stagnates: the step is not taken
-                converged, stop, it = True, stagnant, it - 1
-                logger.debug("shape GN scale %d: the next step (max|d| %.2e mm) is stagnant (%s)",
-                             scale, step, stagnant)
-                break
-
-        within_noise = []
-
-        def propose(mu: float):
-            if within_noise:                 # more damping only shortens a stagnant step
-                return None
-            d = plain if mu == 0.0 else solver.solve(damped(H, mu), b, q, scale)
-            if not np.all(np.isfinite(d)):
-                return None
-            if mu > 0.0 and abs(predicted_chi_square_change(H, b, d, res, quad)) < 1.0:
-                within_noise.append(mu)      # a refused step damped into the noise: stagnant
-                return None
-            return d, evaluate(q + d)
-
-        accepted, mu = damped_step(propose, std, mu, max_damping)
-        if accepted is None:                # no damped step lowers the residual: q is stagnant
-            converged, stop = True, "no descent"
-            logger.debug("shape GN scale %d it %d: no damped step lowers the residual (%.4f%%); "
-                         "stagnant", scale, it, std)
-            break
-        d, trial = accepted
-        change = chi_square_change(res, trial, quad)
-        q, res = q + d, trial
-        step = float(np.max(np.abs(d))) if d.size else 0.0
+    def on_step(it: int, std: float, res: GrayLevelResidual, step: float, mu: float) -> None:
         if log is not None:
             log.add(**(context or {}), scale=scale, stage="shape", iteration=it,
                     residual_percent=res.std_percent, step=step, damping=mu,
@@ -228,16 +178,12 @@ def shape_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             on_iteration(it, res.std_percent)
         logger.debug("shape GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, mu %.1e",
                      scale, it, std, res.std_percent, step, mu)
-        mu = relaxed(mu)
-        if step < tol_mm:
-            converged, stop = True, "step"                               # q stagnates
-            break
-        if abs(change) < 1.0:              # the data cannot tell q from q + d: stagnant
-            converged, stop = True, "noise"
-            break
-        if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
-            converged, stop = True, "residual"
-            break
-    return ShapeResult(q=q, residual=res if keep_derivative else dataclasses.replace(res, dr_dX=None),
-                       iterations=it,
-                       converged=converged, damping=mu, stop=stop)
+
+    out = damped_gauss_newton(
+        q0, evaluate(np.asarray(q0, float)) if start is None or start.dr_dX is None else start,
+        evaluate, lambda res: shape_operators(quad, normals, res),
+        lambda H, b, q: solver.solve(H, b, q, scale), lambda res: chi_square(res, quad),
+        tol_mm, max_iter, max_damping, residual_rtol, on_step, f"shape GN scale {scale}")
+    res = out.residual if keep_derivative else dataclasses.replace(out.residual, dr_dX=None)
+    return ShapeResult(q=out.q, residual=res, iterations=out.iterations,
+                       converged=out.converged, damping=out.damping, stop=out.stop)

@@ -10,6 +10,7 @@ supplies its own from outside, without the core knowing about it.
 from __future__ import annotations
 
 import logging
+import threading
 from typing import Callable, Protocol, runtime_checkable
 
 import numpy as np
@@ -64,7 +65,11 @@ class StepSolver(Protocol):
 #     (:func:`fesdic_core.uncertainty.shape_std`);
 # bias_step(H, b, q, scale) -> (n,)
 #     how much the shape would move, linearised at the converged state, if the
-#     regularization were one notch weaker (zeros for none): the bias indicator.
+#     regularization were one notch weaker (zeros for none): the bias indicator;
+# factorize(H, scale) -> step(b, q) -> d
+#     the step's map for a fixed ``H`` with its factorization done once: ``step(b, q)`` must
+#     equal ``solve(H, b, q, scale)``. Used by :class:`CachedFactorization` when ``H`` is the
+#     same from one iteration to the next (the displacement's modified Gauss-Newton).
 
 
 def sparse_solve(H: sps.spmatrix, b: np.ndarray, what: str = "H_FE") -> np.ndarray:
@@ -83,6 +88,30 @@ def sparse_solve(H: sps.spmatrix, b: np.ndarray, what: str = "H_FE") -> np.ndarr
     return np.asarray(d, dtype=float)
 
 
+def sparse_factor(H: sps.spmatrix, what: str = "H_FE") -> Callable[[np.ndarray], np.ndarray]:
+    """The map ``b -> H^-1 b`` of a symmetric positive definite ``H``, factorized once
+    (SuperLU with a symmetric ordering), with the errors of :func:`sparse_solve`."""
+    H = sps.csc_matrix(H)
+    empty = np.flatnonzero(H.diagonal() <= 0.0)
+    if empty.size:
+        raise SingularSystemError(
+            f"{what} has {empty.size} empty rows (first: dof {empty[0]}): no integration "
+            "point sees these nodes; crop the mesh to the visible region or regularize")
+    try:
+        lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    except RuntimeError as err:                                # "Factor is exactly singular"
+        raise SingularSystemError(f"{what} is singular ({H.shape[0]} dofs): {err}") from None
+
+    def solve(b: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            d = lu.solve(np.asarray(b, dtype=float))
+        if not np.all(np.isfinite(d)):
+            raise SingularSystemError(f"{what} is numerically singular ({H.shape[0]} dofs)")
+        return d
+    return solve
+
+
 def seen_dofs(H: sps.spmatrix) -> np.ndarray:
     """(n,) bool: the dofs whose diagonal term of ``H`` is not zero (some point sees them)."""
     d = H.diagonal()
@@ -95,6 +124,11 @@ class DirectSolver:
     def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         return sparse_solve(H, b)
 
+    def factorize(self, H: sps.spmatrix, scale: int) -> Callable:
+        """``(b, q) -> H^-1 b`` with ``H`` factorized once (:func:`sparse_factor`)."""
+        solve = sparse_factor(H)
+        return lambda b, q: solve(b)
+
     def step_covariance(self, H: sps.spmatrix, scale: int):
         """``G H G^T = H^-1`` (:func:`inverse_covariance`)."""
         return inverse_covariance(H)
@@ -105,6 +139,53 @@ class DirectSolver:
 
     def __repr__(self) -> str:
         return "DirectSolver()"
+
+
+class CachedFactorization:
+    """A step solver for a Gauss-Newton whose ``H`` stays the same object while it does not
+    change (the displacement's modified Gauss-Newton: one ``H`` per image scale, built from
+    the reference). The wrapped solver's ``factorize(H, scale)`` runs once per ``(H, scale)``
+    and its step serves every later call with that very ``H``; a solver without
+    ``factorize`` is called as usual.
+
+    The cache is keyed on the identity of ``H`` (a reference to it is kept, so the key cannot
+    be reused by another matrix); the last ``max_entries`` are kept (the undamped ``H`` of
+    each scale and a few Levenberg-Marquardt matrices). ``copy.deepcopy`` returns the same
+    object (the steps are functions of ``H`` alone, shared by every frame of a series) and
+    pickling drops the factors (each Dask worker factorizes once).
+    """
+
+    def __init__(self, solver: StepSolver, max_entries: int = 8):
+        self.solver = solver
+        self.max_entries = int(max_entries)
+        self._steps: dict = {}
+        self._lock = threading.Lock()
+
+    def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        factorize = getattr(self.solver, "factorize", None)
+        if not callable(factorize):
+            return self.solver.solve(H, b, q, scale)
+        key = (int(scale), id(H))
+        entry = self._steps.get(key)
+        if entry is None or entry[0] is not H:
+            entry = (H, factorize(H, scale))
+            with self._lock:
+                self._steps[key] = entry
+                while len(self._steps) > self.max_entries:
+                    self._steps.pop(next(iter(self._steps)))
+        return entry[1](b, q)
+
+    def __deepcopy__(self, memo: dict) -> "CachedFactorization":
+        return self
+
+    def __getstate__(self) -> dict:
+        return {"solver": self.solver, "max_entries": self.max_entries}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["solver"], state["max_entries"])
+
+    def __repr__(self) -> str:
+        return f"CachedFactorization({self.solver!r})"
 
 
 def inverse_diagonal(H: sps.spmatrix) -> np.ndarray:

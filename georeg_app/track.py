@@ -34,6 +34,7 @@ from fesdic_core.image import Image, read_image
 from fesdic_core.mesh import SurfaceMesh
 from fesdic_core.mesh_io import read_mesh
 from fesdic_core.rig import read_cameras_json
+from fesdic_core.solvers import CachedFactorization, DirectSolver
 from georeg_plugin.solver import GeometricRegularization
 from georeg_plugin.spline_io import read_spline_json
 
@@ -50,8 +51,10 @@ __all__ = ["SeriesReference", "FrameResult", "TrackRun", "load_reference", "chec
 @dataclasses.dataclass(frozen=True, eq=False)
 class SeriesReference:
     """Everything a frame needs, built once: the displacement reference (surface, cameras,
-    reference pyramids and quadratures) and the step solver's prototype (copied per frame:
-    a Tikhonov solver keeps per-scale state)."""
+    reference pyramids and quadratures, with ``jacobian = "reference"`` the reference
+    Jacobian and H of each scale) and the step solver's prototype (copied per frame: a
+    Tikhonov solver keeps per-scale state; a :class:`CachedFactorization`, the modified
+    Gauss-Newton's, is shared: its factors of the reference's H serve every frame)."""
 
     displacement: DisplacementReference
     solver: object | None
@@ -169,11 +172,14 @@ def check_frames(config: TrackConfig, size: tuple[int, int]) -> None:
 def series_reference(config: TrackConfig, progress: bool = False) -> SeriesReference:
     """Load or measure the reference and build the displacement reference and solver."""
     mesh, cameras, images, model, label = load_reference(config, progress)
-    settings = DisplacementSettings(scales=config.displacement.scale_sequence,
-                                    normalisation=config.method.normalisation)
-    reference = displacement_reference(mesh, images, cameras, settings)
     d = config.displacement
+    settings = DisplacementSettings(scales=d.scale_sequence,
+                                    normalisation=config.method.normalisation,
+                                    jacobian=d.jacobian)
+    reference = displacement_reference(mesh, images, cameras, settings)
     solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
+    if d.jacobian == "reference":      # H of each scale factorized once for the whole series
+        solver = CachedFactorization(DirectSolver() if solver is None else solver)
     return SeriesReference(displacement=reference, solver=solver,
                            prefilter_px=config.method.prefilter_px, label=label)
 

@@ -24,6 +24,10 @@ A complete example (optional keys show their default in parentheses)::
                                   # reference stays frame 0               (default true)
     tikhonov_length_mm = 10.0     # method = "tikhonov": length (mm) on each component (10)
     levels = 2                    # method = "georeg": spline levels per component (2)
+    jacobian = "reference"        # "reference": modified Gauss-Newton, H of the reference
+                                  # images built and factorized once per scale for every
+                                  # iteration and frame; "current": full Gauss-Newton, H
+                                  # rebuilt at each iteration      (default "reference")
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
@@ -42,6 +46,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from fesdic_core.displacement import JACOBIANS
 
 from .config import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig, OutputConfig,
                      _cameras, _geometry, _images, _method)
@@ -74,6 +80,7 @@ class DisplacementConfig:
     incremental: bool = True
     tikhonov_length_mm: float = 10.0
     levels: int = 2
+    jacobian: str = "reference"
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:
@@ -156,13 +163,16 @@ def _displacement(data: Any, source: Path) -> DisplacementConfig:
         incremental=t.take("incremental", boolean, "true or false", default=d.incremental),
         tikhonov_length_mm=t.take("tikhonov_length_mm", number, "a number (mm)",
                                   default=d.tikhonov_length_mm),
-        levels=t.take("levels", integer, "an integer", default=d.levels))
+        levels=t.take("levels", integer, "an integer", default=d.levels),
+        jacobian=t.take("jacobian", string, "a string", default=d.jacobian))
     t.finish()
     check(t, "method", c.method, c.method in DISPLACEMENT_METHODS,
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
     check(t, "scales", c.scales, c.scales >= 1, ">= 1")
     check(t, "tikhonov_length_mm", c.tikhonov_length_mm, c.tikhonov_length_mm > 0, "> 0 (mm)")
     check(t, "levels", c.levels, c.levels >= 1, ">= 1")
+    check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
+          "one of " + ", ".join(map(json.dumps, JACOBIANS)))
     return c
 
 

@@ -54,6 +54,11 @@ def _sparse_solve(A: sps.spmatrix, b: np.ndarray, level: int, what: str,
     A zero diagonal term names the spline dof that nothing constrains; a singular
     factorisation or a non-finite solution names the level.
     """
+    return _sparse_factor(A, level, what, hint)(b)
+
+
+def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint: str):
+    """The map ``b -> A^-1 b`` of :func:`_sparse_solve`, ``A`` factorized once."""
     A = sps.csc_matrix(A)
     diag = A.diagonal()
     scale = float(np.max(np.abs(diag))) if diag.size else 0.0
@@ -80,12 +85,15 @@ def _sparse_solve(A: sps.spmatrix, b: np.ndarray, level: int, what: str,
             f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
             f"singular (pivot ratio {pivots[k] / pivots.max():.1e} at spline dof {dof}; "
             f"{hint.format(dof=dof)}?); {advice}")
-    x = lu.solve(np.asarray(b, dtype=float))
-    if not np.all(np.isfinite(x)):
-        raise SingularProjectionError(
-            f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
-            "singular (non-finite solution): use a coarser level at this scale")
-    return x
+
+    def solve(b: np.ndarray) -> np.ndarray:
+        x = lu.solve(np.asarray(b, dtype=float))
+        if not np.all(np.isfinite(x)):
+            raise SingularProjectionError(
+                f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
+                "singular (non-finite solution): use a coarser level at this scale")
+        return x
+    return solve
 
 
 def _seen_dofs(A: sps.spmatrix) -> np.ndarray:
@@ -177,21 +185,37 @@ class GeometricRegularization:
 
         ``q`` (the current nodal shape) is not needed: the step is linear in ``b``.
         """
+        return self.factorize(H, scale)(b, q)
+
+    def factorize(self, H, scale: int):
+        """The step's map ``(b, q) -> C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21) with
+        ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change."""
         s = self.level(scale)
-        H_s, b_s = self.project(H, b, s)
-        seen = np.ones(b_s.size, dtype=bool)
+        C, CT = self.operator(s), self._transposed[s]
+        H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
+        seen = np.ones(H_s.shape[0], dtype=bool)
         if self.hold_unseen:                                   # dofs no point sees keep their value
             seen = _seen_dofs(H_s)
             if not seen.all():
                 logger.debug("level %d: %d of %d spline dofs unseen, held", s,
                              np.count_nonzero(~seen), seen.size)
-                H_s, b_s = H_s[seen][:, seen], b_s[seen]
-        d_s = np.zeros(seen.size)
-        if b_s.size:
-            d_s[seen] = _sparse_solve(H_s, b_s, s, "projected Hessian C_s H C_s^T",
-                                      "no integration point sees spline dof {dof}")
-        logger.debug("scale %d -> spline level %d: %d dofs", scale, s, d_s.size)
-        return self._transposed[s] @ d_s  # Eq. 21
+                H_s = H_s[seen][:, seen]
+        solve = _sparse_factor(H_s, s, "projected Hessian C_s H C_s^T",
+                               "no integration point sees spline dof {dof}") \
+            if seen.any() else None
+        logger.debug("scale %d -> spline level %d: %d dofs", scale, s, seen.size)
+
+        def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
+            b = np.asarray(b, dtype=float)
+            if b.shape != (C.shape[1],):
+                raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
+                                 f"spline level {s}")
+            b_s = C @ b                                                # Eq. 19
+            d_s = np.zeros(seen.size)
+            if solve is not None:
+                d_s[seen] = solve(b_s[seen])
+            return CT @ d_s                                            # Eq. 21
+        return step
 
     def step_covariance(self, H, scale: int):
         """Covariance of the step per unit noise, ``C_s^T (C_s H C_s^T)^-1 C_s`` (Eq. 21 applied

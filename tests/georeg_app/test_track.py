@@ -80,6 +80,7 @@ def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, 
     assert [f["index"] for f in frames] == [1, 2, 3, 4]
     assert [f["status"] for f in frames] == ["ok", "ok", "failed", "ok"]
     assert summary["failed_frames"] == [3] and "texture" in frames[2]["failure"]
+    assert summary["displacement"]["jacobian"] == "reference"          # the default
     assert not frames[2]["converged"] and all(frames[k]["converged"] for k in (0, 1, 3))
     assert [f["start_frame"] for f in frames] == [0, 1, 2, 2]       # on from the last good one
     for key in ("index", "cam0", "cam1", "residual_percent", "iterations", "converged", "time_s",
@@ -254,3 +255,10 @@ def _fails_with(capsys, options, folder, tmp_path, text):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("georeg: error: ") and text in err[0], err
     assert not out.exists()
+
+
+def test_an_unknown_jacobian_is_named(series, tmp_path, capsys):
+    folder, _ = series
+    config = _config(folder, displacement='method = "fe"\njacobian = "deformed"')
+    _fails_naming(capsys, config, tmp_path / "out", "[displacement]", "jacobian", "deformed",
+                  '"reference"', '"current"')

@@ -229,3 +229,20 @@ def test_hold_unseen_keeps_unseen_dofs_and_solves_the_others(two_levels):
     b = rng.standard_normal(space.n_fe)
     assert_allclose(GeometricRegularization(space, hold_unseen=True).solve(H, b, b, 1),
                     GeometricRegularization(space).solve(H, b, b, 1), rtol=1e-12)
+
+
+def test_factorize_gives_the_step_of_solve_for_every_right_hand_side(two_levels):
+    """``factorize(H, scale)`` (C_s H C_s^T factorized once) is the map of ``solve``: the same
+    step, to round-off, for several right-hand sides and both levels."""
+    space, rng = two_levels
+    reg = GeometricRegularization(space)
+    H = _random_spd(space.n_fe, rng)
+    for scale in (0, 1):
+        step = reg.factorize(H, scale)
+        for _ in range(3):
+            b = rng.standard_normal(space.n_fe)
+            q = rng.standard_normal(space.n_fe)
+            assert_allclose(step(b, q), reg.solve(H, b, q, scale), rtol=1e-12,
+                            atol=1e-14 * np.abs(b).max())
+    with pytest.raises(ValueError, match="does not match"):
+        reg.factorize(H, 0)(np.ones(5), np.zeros(5))
