@@ -254,3 +254,31 @@ def _fails_with(capsys, options, folder, tmp_path, text):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("georeg: error: ") and text in err[0], err
     assert not out.exists()
+
+
+def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(monkeypatch):
+    """``[method] prefilter_px`` and ``interpolation_order`` reach the reference pair and the
+    frames (one image model for every pair the displacement compares)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from georeg_app import track
+    from georeg_app.config import MethodConfig
+
+    seen = []
+
+    def fake_read_image(path, prefilter_px, order):
+        seen.append((path, prefilter_px, order))
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(track, "read_image", fake_read_image)
+    method = MethodConfig(prefilter_px=0.7, interpolation_order=5)
+    config = SimpleNamespace(method=method, images=SimpleNamespace(cam0="a.png", cam1="b.png"))
+    with pytest.raises(ValueError, match="stop here"):
+        track._reference_images(config)
+    reference = track.SeriesReference(displacement=None, solver=None, prefilter_px=0.7, label="ref",
+                                      interpolation_order=5)
+    result = track.measure_frame(reference, 1, ["c.png", "d.png"], None, 0)
+    assert result.failure and "stop here" in result.failure
+    assert seen == [("a.png", 0.7, 5), ("c.png", 0.7, 5)]
+    assert dataclasses.fields(track.SeriesReference)[-1].default == 3
