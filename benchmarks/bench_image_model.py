@@ -46,7 +46,8 @@ noise: nothing for coarse scales to do; on this fine mesh they can throw a node 
 specimen's edge off by millimetres, which would swamp the all-node RMS).
 
 Run: ``python benchmarks/bench_image_model.py [--quick] [--repeat 3]
-[--prefilters 0,0.5,0.7,0.9,1.2] [--orders 3 5] [--cases demo,bump,bump-noise] [--coarse same] [--terms]``
+[--prefilters 0,0.5,0.7,0.9,1.2] [--orders 3 5] [--cases demo,bump,bump-noise] [--edge-margin 2]
+[--coarse same] [--terms]``
 """
 from __future__ import annotations
 
@@ -220,6 +221,8 @@ def main() -> None:
     p.add_argument("--orders", type=int, nargs="+", default=[3], choices=(3, 5),
                    help="B-spline orders of the interpolant (3 cubic, 5 quintic)")
     p.add_argument("--cases", default="demo,bump,bump-noise")
+    p.add_argument("--edge-margin", type=float, default=None,
+                   help="[method] edge_margin_px of every case (default: the config's default)")
     p.add_argument("--repeat", type=int, default=3, help="runs per case (noise seeds)")
     p.add_argument("--coarse", choices=("same", "none", "half"), default="same",
                    help="prefilter of the coarse scales (same sigma in coarse px, none, sigma / 2)")
@@ -237,8 +240,9 @@ def main() -> None:
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cpus, python {platform.python_version()}, compiled kernel {COMPILED_KERNEL}, "
           f"load average {os.getloadavg()[0]:.2f}")
+    margin = MethodConfig().edge_margin_px if args.edge_margin is None else args.edge_margin
     print(f"prefilters {prefilters} px, orders {orders}, coarse scales: {args.coarse}, "
-          f"{args.repeat} run(s) per case")
+          f"{args.repeat} run(s) per case, edge margin {margin:g} px")
     if args.terms:
         other_terms(prefilters, args.repeat)
         print(f"\nelapsed {time.perf_counter() - t0:.0f} s, load average {os.getloadavg()[0]:.2f}")
@@ -251,6 +255,8 @@ def main() -> None:
         for case in cases:
             t = time.perf_counter()
             scene = makers[case]()
+            if args.edge_margin is not None:
+                scene.method = dataclasses.replace(scene.method, edge_margin_px=args.edge_margin)
             print(f"\n{case}: rendered in {time.perf_counter() - t:.1f} s", flush=True)
             for order, pf in [(o, p) for o in orders for p in prefilters]:
                 runs = [run_case(scene, pf, k, image_class, Path(tmp), order) for k in range(args.repeat)]
