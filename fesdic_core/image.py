@@ -39,9 +39,11 @@ The interpolation order is a setting too (``order``, :data:`ORDERS`; default
 :data:`DEFAULT_ORDER` = 3): ``order=5`` interpolates by the quintic B-spline
 ``sum_kl c_kl b5(y - k) b5(x - l)`` (coefficients by ``spline_filter(order=5)``, same
 mirror boundary), whose value and gradient are one 6x6 sum, compiled in
-``fesdic_core._bspline5`` (numpy twin :func:`_evaluate_numpy5`). Its sub-pixel bias is
-lower (``benchmarks/bench_interpolation_bias.py``); its support is one pixel wider on
-each side, so :meth:`Image.inside` keeps points 2.5 px inside the border instead of 1.5.
+``fesdic_core._bspline5`` (numpy twin :func:`_evaluate_numpy5`; 2-3x the cubic's time).
+Its sub-pixel bias is lower (``benchmarks/bench_interpolation_bias.py``), but end to end
+it changes the shape errors by a few percent at most (``bench_image_model.py --orders 3 5``,
+README "Interpolation bias"); its support is one pixel wider on each side, so
+:meth:`Image.inside` keeps points 2.5 px inside the border instead of 1.5.
 
 The multiscale images of Remark 3 (:meth:`Image.coarsen`) are 2x2 block means of the RAW
 values, modelled with the same ``prefilter_px`` in coarse pixels (a coarse image is the
