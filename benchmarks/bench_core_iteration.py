@@ -95,7 +95,7 @@ def iteration(repeat: int) -> None:
 def interpolation(repeat: int, order: int = 3) -> None:
     from scipy import ndimage
 
-    from fesdic_core import image as image_module
+    from fesdic_core import bspline5, image as image_module
     from fesdic_core.image import Image
 
     h, w, n = 2048, 2448, 5_000_000
@@ -103,7 +103,7 @@ def interpolation(repeat: int, order: int = 3) -> None:
     image = Image.from_array(rng.uniform(0.0, 255.0, (h, w)), "random", order=order)
     xy = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)])
     xy = xy[np.lexsort((xy[:, 0], np.floor(xy[:, 1] / 32.0)))]     # bands of rows, as elements
-    compiled, twin = ((image_module.COMPILED_KERNEL5, image_module._evaluate_numpy5) if order == 5
+    compiled, twin = ((image_module.COMPILED_KERNEL5, bspline5.evaluate_numpy) if order == 5
                       else (image_module.COMPILED_KERNEL, image_module._evaluate_numpy))
     print(f"\ninterpolation of {n:,} points in a {w} x {h} image, B-spline order {order} "
           f"(median of {repeat}, load average {os.getloadavg()[0]:.2f}):")

@@ -1,6 +1,6 @@
 /* Fused evaluation of a biquintic B-spline image interpolant: value and exact gradient.
  *
- * The compiled twin of fesdic_core.image._evaluate_numpy5 (same arithmetic, one pass per
+ * The compiled twin of fesdic_core.bspline5.evaluate_numpy (same arithmetic, one pass per
  * point, the 6x6 coefficient support read row by row from a padded coefficient array);
  * the quintic counterpart of _bspline.c (same conventions: pixel coordinates (x, y) =
  * (column, row), pixel centres at integers, coordinates folded into [0, n - 1] by the

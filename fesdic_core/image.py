@@ -39,7 +39,7 @@ The interpolation order is a setting too (``order``, :data:`ORDERS`; default
 :data:`DEFAULT_ORDER` = 3): ``order=5`` interpolates by the quintic B-spline
 ``sum_kl c_kl b5(y - k) b5(x - l)`` (coefficients by ``spline_filter(order=5)``, same
 mirror boundary), whose value and gradient are one 6x6 sum, compiled in
-``fesdic_core._bspline5`` (numpy twin :func:`_evaluate_numpy5`; 2-3x the cubic's time).
+``fesdic_core._bspline5`` (numpy twin in :mod:`fesdic_core.bspline5`; 2-3x the cubic's time).
 Its sub-pixel bias is lower (``benchmarks/bench_interpolation_bias.py``), but end to end
 it changes the shape errors by a few percent at most (``bench_image_model.py --orders 3 5``,
 README "Interpolation bias"); its support is one pixel wider on each side, so
@@ -61,16 +61,13 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from . import bspline5
 from .parallel import for_each_block
 
 try:
     from . import _bspline                       # compiled at install (setup.py), optional
 except ImportError:                              # pragma: no cover - no C compiler at install
     _bspline = None
-try:
-    from . import _bspline5                      # the quintic kernel, likewise optional
-except ImportError:                              # pragma: no cover - no C compiler at install
-    _bspline5 = None
 
 logger = logging.getLogger(__name__)
 
@@ -89,7 +86,7 @@ ORDERS = (3, 5)
 #: default interpolation order of the image model
 DEFAULT_ORDER = 3
 #: True when the quintic kernel is compiled (else its numpy twin)
-COMPILED_KERNEL5 = _bspline5 is not None
+COMPILED_KERNEL5 = bspline5.COMPILED
 
 _BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
 
@@ -99,7 +96,6 @@ class ImageError(ValueError):
 
 
 _PAD = 2                          # coefficient padding: covers the 4x4 support of x in [0, n - 1]
-_PAD5 = 3                         # the same for the quintic's 6x6 support
 _BLOCK = 1 << 14                  # points per block of the numpy twin (bounds memory)
 _PARALLEL_BLOCK = 1 << 17         # points per block shared out over threads
 
@@ -152,25 +148,6 @@ def _cubic_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                    t2 * t]) * (1.0 / 6.0)
     dw = np.hstack([-s * s, 3.0 * t2 - 4.0 * t, -3.0 * t2 + 2.0 * t + 1.0, t2]) * 0.5
     return w, dw
-
-
-def _quintic_weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Quintic B-spline weights (m, 6) of the nodes ``i-2 .. i+3`` at ``i + t``, and their derivatives.
-
-    ``b5`` at the distances ``t+2, t+1, t, 1-t, 2-t, 3-t``, expanded in powers of ``t``.
-    """
-    powers = t[:, None] ** np.arange(6)                                        # (m, 6): 1, t .. t^5
-    w = powers @ (_QUINTIC.T / 120.0)
-    dw = powers[:, :5] @ ((_QUINTIC[:, 1:] * np.arange(1, 6)).T / 120.0)
-    return w, dw
-
-
-_QUINTIC = np.array([[1, -5, 10, -10, 5, -1],      # 120 w_a(t) = sum_p _QUINTIC[a, p] t^p
-                     [26, -50, 20, 20, -20, 5],
-                     [66, 0, -60, 0, 30, -10],
-                     [26, 50, 20, -20, -20, 10],
-                     [1, 5, 10, 10, 5, -5],
-                     [0, 0, 0, 0, 0, 1]], dtype=np.float64)
 
 
 def _xy(xy: np.ndarray) -> np.ndarray:
@@ -228,7 +205,7 @@ class Image:
         except ValueError as err:
             raise ImageError(f"image {self.source!r}: {err}") from None
         object.__setattr__(self, "dynamic_range", float(self.dynamic_range))
-        pad = _PAD5 if self.order == 5 else _PAD
+        pad = bspline5.PAD if self.order == 5 else _PAD
         padded = np.pad(self.coefficients, pad, mode="reflect")    # numpy "reflect" = scipy "mirror"
         object.__setattr__(self, "_padded", np.ascontiguousarray(padded).ravel())
 
@@ -310,7 +287,7 @@ class Image:
         grad = np.empty((len(xy), 2))
         kernel = _evaluate_compiled if _bspline is not None else _evaluate_numpy
         if self.order == 5:
-            kernel = _evaluate_compiled5 if _bspline5 is not None else _evaluate_numpy5
+            kernel = bspline5.evaluate_compiled if bspline5.COMPILED else bspline5.evaluate_numpy
 
         def run(block: slice) -> None:
             kernel(self._padded, h, w, xy[block], value[block], grad[block])
@@ -378,36 +355,6 @@ def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: n
         if not finite.all():
             value[block][~finite] = np.nan
             grad[block][~finite] = np.nan
-
-
-def _evaluate_compiled5(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
-                        grad: np.ndarray) -> None:
-    """Fill ``value`` (n,) and ``grad`` (n, 2) at ``xy`` (n, 2) with the compiled quintic kernel."""
-    _bspline5.evaluate(padded, h, w, _PAD5, xy, value, grad)
-
-
-def _evaluate_numpy5(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
-                     grad: np.ndarray) -> None:
-    """The numpy twin of the compiled quintic kernel: :func:`_evaluate_numpy` with 6x6 weights."""
-    stencil = (np.arange(6)[:, None] * (w + 2 * _PAD5) + np.arange(6)).ravel()
-    for start in range(0, len(xy), _BLOCK):
-        block = slice(start, start + _BLOCK)
-        finite = np.isfinite(xy[block]).all(axis=1)
-        pts = np.where(finite[:, None], xy[block], 0.0)            # NaN in, NaN out
-        x, sx = _fold(pts[:, 0], w)
-        y, sy = _fold(pts[:, 1], h)
-        i, j = np.floor(y), np.floor(x)
-        wy, dwy = _quintic_weights(y - i)
-        wx, dwx = _quintic_weights(x - j)
-        corner = (i.astype(np.int64) + _PAD5 - 2) * (w + 2 * _PAD5) + j.astype(np.int64) + _PAD5 - 2
-        c = padded.take(corner[:, None] + stencil).reshape(-1, 6, 6)
-        cx = np.einsum("nab,nb->na", c, wx)
-        cdx = np.einsum("nab,nb->na", c, dwx)
-        value[block] = np.einsum("na,na->n", wy, cx)
-        grad[block, 0] = sx * np.einsum("na,na->n", wy, cdx)
-        grad[block, 1] = sy * np.einsum("na,na->n", dwy, cx)
-        value[block][~finite] = np.nan
-        grad[block][~finite] = np.nan
 
 
 def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_PX,

@@ -331,19 +331,6 @@ def test_quintic_value_is_map_coordinates_and_gradient_its_derivative(shape, pre
         assert np.abs(grad[:, k] - fd).max() / scale < 1e-6
 
 
-def test_quintic_weights_are_the_b_spline():
-    """Partition of unity, reproduction of x (sum_a (a - 2) w_a = t), derivative by difference."""
-    t = np.linspace(0.0, 1.0, 101)
-    w, dw = image_module._quintic_weights(t)
-    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-15)
-    np.testing.assert_allclose(w @ np.arange(-2, 4), t, atol=1e-15)
-    np.testing.assert_allclose(dw.sum(axis=1), 0.0, atol=1e-14)
-    h = 1e-6
-    fd = (image_module._quintic_weights(t + h)[0] - image_module._quintic_weights(t - h)[0]) / (2 * h)
-    np.testing.assert_allclose(dw, fd, atol=1e-9)
-    np.testing.assert_allclose(w[0], [1, 26, 66, 26, 1, 0] / np.float64(120), atol=1e-16)   # b5 at nodes
-
-
 def test_quintic_is_more_accurate_on_a_smooth_field():
     """Interpolation error O((k h)^6) against the cubic's O((k h)^4): at 23 px a period, 16 px
     from the border, the cubic misses by 1.9e-5 of the amplitude, the quintic by 1.5e-7.
@@ -370,23 +357,6 @@ def test_quintic_is_more_accurate_on_a_smooth_field():
     assert error5 < 1e-6 * 50.0 and error5 < 0.05 * error3
     assert np.abs(grad[:, 0] - gx).max() < 1e-5 * 50.0 * kx
     assert np.abs(grad[:, 1] - gy).max() < 1e-5 * 50.0 * ky
-
-
-@pytest.mark.skipif(not image_module.COMPILED_KERNEL5, reason="installed without the C kernel")
-@pytest.mark.parametrize("shape", [(37, 53), (1, 9), (2, 3), (200, 150)])
-def test_compiled_quintic_kernel_equals_its_numpy_twin(shape):
-    image = _quintic(shape, seed=3)
-    xy = _random_points(image, 200_000, seed=4, pad=40.0)          # mirror folds included
-    xy[::997] = np.nan
-    xy[1::1009, 0] = np.inf
-    h, w = image.shape
-    with parallel.threads(2):                                       # threaded split
-        compiled = image.evaluate_with_gradient(xy)
-    value, grad = np.empty(len(xy)), np.empty((len(xy), 2))
-    image_module._evaluate_numpy5(image._padded, h, w, xy, value, grad)
-    for a, b in zip(compiled, (value, grad)):
-        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * image.dynamic_range, equal_nan=True)
 
 
 def test_quintic_inside_margin_covers_the_wider_support():
