@@ -11,8 +11,11 @@ resident memory; then the interpolation alone (value + gradient) of 5 million po
 the compiled kernel, its numpy twin and, for reference, ``scipy.ndimage.map_coordinates``
 (value only); and the interpolation error on a known smooth image
 ``f = 128 + 100 sin(2 pi x / L) cos(2 pi y / L)`` for wavelengths L of 4, 8 and 16 px.
+The interpolation part is run for each B-spline order of ``--orders`` (3 cubic, the default;
+5 quintic, its own compiled 6 x 6 kernel); ``--interpolation-only`` skips the iteration.
 
-Run: ``python benchmarks/bench_core_iteration.py [--repeat 5] [--threads N]``
+Run: ``python benchmarks/bench_core_iteration.py [--repeat 5] [--threads N] [--orders 3 5]
+[--interpolation-only]``
 """
 from __future__ import annotations
 
@@ -89,28 +92,30 @@ def iteration(repeat: int) -> None:
     print(f"peak resident memory of the process: {peak:.2f} GB")
 
 
-def interpolation(repeat: int) -> None:
+def interpolation(repeat: int, order: int = 3) -> None:
     from scipy import ndimage
 
-    from fesdic_core import image as image_module
+    from fesdic_core import bspline5, image as image_module
     from fesdic_core.image import Image
 
     h, w, n = 2048, 2448, 5_000_000
     rng = np.random.default_rng(0)
-    image = Image.from_array(rng.uniform(0.0, 255.0, (h, w)), "random")
+    image = Image.from_array(rng.uniform(0.0, 255.0, (h, w)), "random", order=order)
     xy = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)])
     xy = xy[np.lexsort((xy[:, 0], np.floor(xy[:, 1] / 32.0)))]     # bands of rows, as elements
-    print(f"\ninterpolation of {n:,} points in a {w} x {h} image (median of {repeat}):")
-    if image_module.COMPILED_KERNEL:
+    compiled, twin = ((image_module.COMPILED_KERNEL5, bspline5.evaluate_numpy) if order == 5
+                      else (image_module.COMPILED_KERNEL, image_module._evaluate_numpy))
+    print(f"\ninterpolation of {n:,} points in a {w} x {h} image, B-spline order {order} "
+          f"(median of {repeat}, load average {os.getloadavg()[0]:.2f}):")
+    if compiled:
         t, _ = _median_time(lambda: image.evaluate_with_gradient(xy), repeat)
         print(f"  compiled kernel, value + gradient: {t:.3f} s ({image_module.__name__}, "
               f"{parallel.default_pool().threads} threads)")
     value, grad = np.empty(n), np.empty((n, 2))
-    t, _ = _median_time(lambda: image_module._evaluate_numpy(image._padded, h, w, xy, value, grad),
-                        max(1, repeat // 2))
+    t, _ = _median_time(lambda: twin(image._padded, h, w, xy, value, grad), max(1, repeat // 2))
     print(f"  numpy twin, value + gradient:      {t:.3f} s (one thread)")
     t, _ = _median_time(lambda: ndimage.map_coordinates(image.coefficients, [xy[:, 1], xy[:, 0]],
-                                                        order=3, prefilter=False, mode="mirror"),
+                                                        order=order, prefilter=False, mode="mirror"),
                         max(1, repeat // 2))
     print(f"  scipy map_coordinates, value only: {t:.3f} s (one thread)")
     print("\ninterpolation error on f = 128 + 100 sin(2 pi x / L) cos(2 pi y / L), "
@@ -119,7 +124,7 @@ def interpolation(repeat: int) -> None:
     pts = np.column_stack([rng.uniform(8, 503, 1_000_000), rng.uniform(8, 503, 1_000_000)])
     for L in (4.0, 8.0, 16.0):
         k = 2 * np.pi / L
-        smooth = Image.from_array(128 + 100 * np.sin(k * xx) * np.cos(k * yy), f"L={L:g}")
+        smooth = Image.from_array(128 + 100 * np.sin(k * xx) * np.cos(k * yy), f"L={L:g}", order=order)
         v, g = smooth.evaluate_with_gradient(pts)
         x, y = pts[:, 0], pts[:, 1]
         exact = 128 + 100 * np.sin(k * x) * np.cos(k * y)
@@ -135,12 +140,17 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--threads", type=int, default=None,
                         help="threads of the core (default: FESDIC_THREADS, else all CPUs)")
+    parser.add_argument("--orders", type=int, nargs="+", default=[3], choices=(3, 5),
+                        help="B-spline orders of the interpolation timing (3 cubic, 5 quintic)")
+    parser.add_argument("--interpolation-only", action="store_true", help="skip the iteration")
     args = parser.parse_args()
     if args.threads is not None:
         parallel.set_threads(args.threads)
     print(f"machine: {_machine()}; threads: {parallel.default_pool().threads}")
-    iteration(args.repeat)
-    interpolation(args.repeat)
+    if not args.interpolation_only:
+        iteration(args.repeat)
+    for order in dict.fromkeys(args.orders):
+        interpolation(args.repeat, order)
 
 
 if __name__ == "__main__":

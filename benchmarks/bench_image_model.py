@@ -4,7 +4,8 @@ Issue 13 ("lower the floor"): the image model is a Gaussian prefilter of ``prefi
 pixels (sigma) followed by the core's cubic B-spline (:mod:`fesdic_core.image`). This
 measures what the prefilter does to the RMS shape error against the true surface
 (:func:`fesdic_core.accuracy.shape_error_to_surface`, through ``georeg_app.pipeline``)
-of FE (no regularization), Tikhonov 5 mm and georeg (multiscale), and to their time:
+of FE (no regularization), Tikhonov 5 mm and georeg (multiscale, its fixed spline levels: not the level search), and
+to their time:
 
 - ``demo``: the demo of ``georeg demo`` (``georeg_app.pipeline.DEMO``): twisted open-hole
   plate with waviness, 1224 x 816 px, 4 px speckle, 2 gray levels of noise, specimen pose
@@ -26,6 +27,11 @@ over the runs (over noise realisations; the noise-free case is the same every ru
 times the median of ``Measurement.time_s``; the image model's own cost (prefilter +
 spline coefficients of both images) is printed apart.
 
+``--orders 3 5`` measures each prefilter with each B-spline order of the interpolant
+(``Image.from_array(..., order=)``: 3 = cubic, the default, 5 = quintic); the relative
+errors are then taken against (order 3, prefilter 0), and the sum of the errors over the
+(case, method) pairs is printed per (order, prefilter).
+
 ``--coarse`` chooses how the pyramid's coarse scales are modelled, for measuring it:
 ``same`` (the core's: 2x2 means of the raw values, then the same sigma in coarse
 pixels), ``none`` (no prefilter at coarse scales) or ``half`` (sigma / 2 in coarse
@@ -40,7 +46,8 @@ noise: nothing for coarse scales to do; on this fine mesh they can throw a node 
 specimen's edge off by millimetres, which would swamp the all-node RMS).
 
 Run: ``python benchmarks/bench_image_model.py [--quick] [--repeat 3]
-[--prefilters 0,0.5,0.7,0.9,1.2] [--cases demo,bump,bump-noise] [--coarse same] [--terms]``
+[--prefilters 0,0.5,0.7,0.9,1.2] [--orders 3 5] [--cases demo,bump,bump-noise] [--edge-margin 2]
+[--coarse same] [--terms]``
 """
 from __future__ import annotations
 
@@ -68,8 +75,8 @@ from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm
 from fesdic_core.rig import write_cameras_json                      # noqa: E402
 from georeg_app.config import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
                                MethodConfig, OutputConfig)
-from georeg_app.pipeline import (DEMO, Truth, build_model, default_specs, demo_specimen,  # noqa: E402
-                                 run_methods)
+from georeg_app.methods import default_specs, georeg_spec               # noqa: E402
+from georeg_app.pipeline import DEMO, Truth, build_model, demo_specimen, run_methods  # noqa: E402
 from scenes import bump_specimen                                     # noqa: E402
 
 METHODS = ("FE (multiscale)", "Tikhonov 5 mm", "georeg (multiscale)")
@@ -100,7 +107,7 @@ def demo_scene() -> Scene:
     geometry = GeometryConfig(kind="plate_with_hole", length_mm=DEMO["view_mm"], width_mm=DEMO["width_mm"],
                               hole_radius_mm=DEMO["hole_radius_mm"])
     return Scene("demo", clean, DEMO["noise_std"], 11, Truth(specimen, tuple(cams)), tuple(initial),
-                 geometry, MethodConfig(tikhonov_length_mm=(5.0,)))
+                 geometry, MethodConfig(levels=3, tikhonov_length_mm=(5.0,)))
 
 
 def bump_scene(noise_std: float, flat: bool = False) -> Scene:
@@ -135,7 +142,8 @@ def coarse_variant(rule: str) -> type:
             h, w = self.values.shape
             v = self.values[: h - h % 2, : w - w % 2]
             coarse = v.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
-            return Variant.from_array(coarse, f"{self.source} /2", prefilter_px=factor * self.prefilter_px)
+            return Variant.from_array(coarse, f"{self.source} /2", prefilter_px=factor * self.prefilter_px,
+                                      order=self.order)
     return Variant
 
 
@@ -150,11 +158,12 @@ def interior_nodes(mesh) -> np.ndarray:
     return keep
 
 
-def run_case(scene: Scene, prefilter: float, run: int, image_class: type, workdir: Path) -> dict:
-    """Measure one scene (one noise realisation) with one prefilter: per-method results."""
+def run_case(scene: Scene, prefilter: float, run: int, image_class: type, workdir: Path,
+             order: int = 3) -> dict:
+    """Measure one scene (one noise realisation) with one prefilter and order: per-method results."""
     arrays = pixels(scene, run)
     t = time.perf_counter()
-    images = tuple(image_class.from_array(a, f"{scene.name} cam{k}", prefilter_px=prefilter)
+    images = tuple(image_class.from_array(a, f"{scene.name} cam{k}", prefilter_px=prefilter, order=order)
                    for k, a in enumerate(arrays))
     model_s = time.perf_counter() - t
     cameras_file = workdir / f"{scene.name}_cameras.json"
@@ -163,15 +172,17 @@ def run_case(scene: Scene, prefilter: float, run: int, image_class: type, workdi
     config = Config(images=ImagesConfig(cam0=workdir / "cam0 (in memory)", cam1=workdir / "cam1 (in memory)"),
                     cameras=CamerasConfig(file=cameras_file), geometry=scene.geometry, method=scene.method,
                     output=OutputConfig(dir=workdir / "out"), source=workdir / "bench (in memory)")
-    specs = [s for s in default_specs(config) if s.label in METHODS]
+    specs = [s for s in default_specs(config) if s.label in METHODS[:2]]
+    specs.append(georeg_spec(scene.method.fixed_levels, scene.method.scale_sequence))   # fixed levels
     result = run_methods(config, specs, images=images, truth=scene.truth)
     out = {"model_s": model_s}
-    for r in result.results:
+    for r, label in zip(result.results, METHODS):
+        assert r.spec.label.split()[0] == label.split()[0], (r.spec.label, label)
         m = r.measurement
         inner = (np.nan if r.shape_error_mm is None
                  else 1e3 * float(np.sqrt(np.mean(r.shape_error_mm[interior_nodes(r.mesh)] ** 2))))
         error = np.nan if r.shape_rms_error_mm is None else 1e3 * r.shape_rms_error_mm
-        out[r.spec.label] = dict(error_um=error, interior_um=inner,
+        out[label] = dict(error_um=error, interior_um=inner,
                                  time_s=np.nan if m is None else m.time_s, ok=r.ok,
                                  ratio=np.nan if m is None else m.residual_percent / m.noise_percent)
     return out
@@ -205,8 +216,13 @@ def other_terms(prefilters: list[float], repeat: int) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--prefilters", default="0,0.5,0.7,0.9,1.2", help="Gaussian prefilter sigmas (px)")
+    p.add_argument("--prefilters", nargs="+", default=["0,0.5,0.7,0.9,1.2"],
+                   help="Gaussian prefilter sigmas (px), separated by commas or spaces")
+    p.add_argument("--orders", type=int, nargs="+", default=[3], choices=(3, 5),
+                   help="B-spline orders of the interpolant (3 cubic, 5 quintic)")
     p.add_argument("--cases", default="demo,bump,bump-noise")
+    p.add_argument("--edge-margin", type=float, default=None,
+                   help="[method] edge_margin_px of every case (default: the config's default)")
     p.add_argument("--repeat", type=int, default=3, help="runs per case (noise seeds)")
     p.add_argument("--coarse", choices=("same", "none", "half"), default="same",
                    help="prefilter of the coarse scales (same sigma in coarse px, none, sigma / 2)")
@@ -215,15 +231,18 @@ def main() -> None:
                    help="instead: points per pixel and normalisation on the noise-free bump (FE)")
     args = p.parse_args()
     if args.quick:
-        args.prefilters, args.cases, args.repeat = "0,0.5,0.9", "bump,bump-noise", 1
+        args.prefilters, args.cases, args.repeat = ["0,0.5,0.9"], "bump,bump-noise", 1
     logging.basicConfig(level=logging.WARNING)
-    prefilters = [float(v) for v in args.prefilters.split(",")]
+    prefilters = [float(v) for v in ",".join(args.prefilters).split(",") if v]
+    orders = list(dict.fromkeys(args.orders))
     cases = args.cases.split(",")
     t0 = time.perf_counter()
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cpus, python {platform.python_version()}, compiled kernel {COMPILED_KERNEL}, "
           f"load average {os.getloadavg()[0]:.2f}")
-    print(f"prefilters {prefilters} px, coarse scales: {args.coarse}, {args.repeat} run(s) per case")
+    margin = MethodConfig().edge_margin_px if args.edge_margin is None else args.edge_margin
+    print(f"prefilters {prefilters} px, orders {orders}, coarse scales: {args.coarse}, "
+          f"{args.repeat} run(s) per case, edge margin {margin:g} px")
     if args.terms:
         other_terms(prefilters, args.repeat)
         print(f"\nelapsed {time.perf_counter() - t0:.0f} s, load average {os.getloadavg()[0]:.2f}")
@@ -236,10 +255,13 @@ def main() -> None:
         for case in cases:
             t = time.perf_counter()
             scene = makers[case]()
+            if args.edge_margin is not None:
+                scene.method = dataclasses.replace(scene.method, edge_margin_px=args.edge_margin)
             print(f"\n{case}: rendered in {time.perf_counter() - t:.1f} s", flush=True)
-            for pf in prefilters:
-                runs = [run_case(scene, pf, k, image_class, Path(tmp)) for k in range(args.repeat)]
-                row = dict(case=case, prefilter=pf, model_s=np.median([r["model_s"] for r in runs]))
+            for order, pf in [(o, p) for o in orders for p in prefilters]:
+                runs = [run_case(scene, pf, k, image_class, Path(tmp), order) for k in range(args.repeat)]
+                row = dict(case=case, order=order, prefilter=pf,
+                           model_s=np.median([r["model_s"] for r in runs]))
                 for label in METHODS:
                     row[label] = {key: np.median([r[label][key] for r in runs])
                                   for key in ("error_um", "interior_um", "time_s", "ratio")}
@@ -247,36 +269,38 @@ def main() -> None:
                                             np.max([r[label]["error_um"] for r in runs]))
                     row[label]["ok"] = all(r[label]["ok"] for r in runs)
                 rows.append(row)
-                print(f"  prefilter {pf:g}: " + ", ".join(
+                print(f"  order {order}, prefilter {pf:g}: " + ", ".join(
                     f"{label} {row[label]['error_um']:.2f} um {row[label]['time_s']:.1f} s"
                     f"{'' if row[label]['ok'] else ' FAILED'}" for label in METHODS), flush=True)
     print("\nRMS shape error over all nodes / over the interior nodes (um, medians over runs) / "
           "measurement time (s, median) per method;\nresidual/noise floor of georeg; image model "
           "time (s, both images); interior: nodes of no element touching the mesh boundary")
-    print("| case | prefilter (px) | FE | Tikhonov 5 mm | georeg | georeg residual/floor | model (s) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| case | order | prefilter (px) | FE | Tikhonov 5 mm | georeg | georeg residual/floor | model (s) |")
+    print("|---|---|---|---|---|---|---|---|")
     for row in rows:
         cells = [f"{row[m]['error_um']:.2f} / {row[m]['interior_um']:.2f} / {row[m]['time_s']:.1f}"
                  + ("" if row[m]["ok"] else " (failed)") for m in METHODS]
-        print(f"| {row['case']} | {row['prefilter']:g} | " + " | ".join(cells)
+        print(f"| {row['case']} | {row['order']} | {row['prefilter']:g} | " + " | ".join(cells)
               + f" | {row[METHODS[2]]['ratio']:.2f} | {row['model_s']:.2f} |")
     if args.repeat > 1:
         print("\nerror spread over runs (min..max, um):")
         for row in rows:
-            print(f"  {row['case']:10s} {row['prefilter']:3g}: " + ", ".join(
+            print(f"  {row['case']:10s} order {row['order']} {row['prefilter']:3g}: " + ", ".join(
                 f"{m.split()[0]} {row[m]['spread'][0]:.2f}..{row[m]['spread'][1]:.2f}" for m in METHODS))
+    base_order = orders[0]
     for key, what in (("error_um", "all nodes"), ("interior_um", "interior nodes")):
-        print(f"\nerror ({what}) relative to prefilter 0, per method (geometric mean over cases), "
-              "and over every case and method:")
-        base = {(r["case"], m): r[m][key] for r in rows if r["prefilter"] == 0 for m in METHODS}
-        for pf in prefilters:
-            logs = {m: [np.log(r[m][key] / base[r["case"], m]) for r in rows
-                        if r["prefilter"] == pf and (r["case"], m) in base] for m in METHODS}
-            if not any(logs.values()):
-                continue
-            print(f"  prefilter {pf:3g}: " + ", ".join(f"{m.split()[0]} {np.exp(np.mean(v)):.3f}"
-                                                     for m, v in logs.items())
-                  + f"; all {np.exp(np.mean(sum(logs.values(), []))):.3f}")
+        print(f"\nerror ({what}) relative to order {base_order}, prefilter 0, per method (geometric "
+              "mean over cases), and over every case and method; sum of the errors (um):")
+        base = {(r["case"], m): r[m][key] for r in rows
+                if r["prefilter"] == 0 and r["order"] == base_order for m in METHODS}
+        for order, pf in [(o, p) for o in orders for p in prefilters]:
+            mine = [r for r in rows if r["prefilter"] == pf and r["order"] == order]
+            logs = {m: [np.log(r[m][key] / base[r["case"], m]) for r in mine
+                        if (r["case"], m) in base] for m in METHODS}
+            total = sum(r[m][key] for r in mine for m in METHODS)
+            rel = (", ".join(f"{m.split()[0]} {np.exp(np.mean(v)):.3f}" for m, v in logs.items())
+                   + f"; all {np.exp(np.mean(sum(logs.values(), []))):.3f}; " if any(logs.values()) else "")
+            print(f"  order {order}, prefilter {pf:3g}: " + rel + f"sum {total:.2f}")
     print(f"\nelapsed {time.perf_counter() - t0:.0f} s, load average {os.getloadavg()[0]:.2f}")
 
 

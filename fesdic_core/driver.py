@@ -190,6 +190,12 @@ def check_inputs(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence) 
             f"images of different sizes in one stereo pair: {images[0].source} is "
             f"{images[0].shape[1]} x {images[0].shape[0]} px, {images[1].source} is "
             f"{images[1].shape[1]} x {images[1].shape[0]} px")
+    models = [(getattr(im, "prefilter_px", 0.0), getattr(im, "order", 3)) for im in images]
+    if models[0] != models[1]:                   # the residual compares the two interpolants
+        raise MeasurementInputError(
+            f"images of different image models in one stereo pair: {images[0].source} has "
+            f"prefilter_px {models[0][0]:g}, order {models[0][1]}; {images[1].source} has "
+            f"prefilter_px {models[1][0]:g}, order {models[1][1]}")
     for image, cam in zip(images, cameras):
         w, h = cam.image_size
         if (h, w) != tuple(image.shape):

@@ -1,5 +1,5 @@
 """Gray-level images ``f`` and ``g`` of Eq. 3: the image model (Gaussian prefilter + cubic
-B-spline interpolant), its gradient, pyramids.
+or quintic B-spline interpolant), its gradient, pyramids.
 
 Pixel coordinates ``(x, y)`` = (column, row), pixel centres at integers, so the image
 covers ``[-0.5, w - 0.5] x [-0.5, h - 0.5]``.
@@ -35,6 +35,16 @@ vectorised numpy twin :func:`_evaluate_numpy` (same arithmetic, about 10x slower
 ``dynamic_range`` is ``max - min`` of the raw pixel values (of the data, not of the bit
 depth): it is the scale of the gray-level residual reported in percent.
 
+The interpolation order is a setting too (``order``, :data:`ORDERS`; default
+:data:`DEFAULT_ORDER` = 3): ``order=5`` interpolates by the quintic B-spline
+``sum_kl c_kl b5(y - k) b5(x - l)`` (coefficients by ``spline_filter(order=5)``, same
+mirror boundary), whose value and gradient are one 6x6 sum, compiled in
+``fesdic_core._bspline5`` (numpy twin in :mod:`fesdic_core.bspline5`; 2-3x the cubic's time).
+Its sub-pixel bias is lower (``benchmarks/bench_interpolation_bias.py``), but end to end
+it changes the shape errors by a few percent at most (``bench_image_model.py --orders 3 5``,
+README "Interpolation bias"); its support is one pixel wider on each side, so
+:meth:`Image.inside` keeps points 2.5 px inside the border instead of 1.5.
+
 The multiscale images of Remark 3 (:meth:`Image.coarsen`) are 2x2 block means of the RAW
 values, modelled with the same ``prefilter_px`` in coarse pixels (a coarse image is the
 picture a camera of half the resolution would take, so it gets the same model; measured
@@ -51,6 +61,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from . import bspline5
 from .parallel import for_each_block
 
 try:
@@ -61,7 +72,7 @@ except ImportError:                              # pragma: no cover - no C compi
 logger = logging.getLogger(__name__)
 
 __all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL", "DEFAULT_PREFILTER_PX",
-           "check_prefilter"]
+           "check_prefilter", "ORDERS", "DEFAULT_ORDER", "check_order", "COMPILED_KERNEL5"]
 
 #: True when the fused C kernel is in use (else the numpy twin)
 COMPILED_KERNEL = _bspline is not None
@@ -69,6 +80,13 @@ COMPILED_KERNEL = _bspline is not None
 #: default standard deviation (px) of the Gaussian prefilter of the image model
 #: (measured choice: benchmarks/bench_image_model.py, README "Interpolation bias")
 DEFAULT_PREFILTER_PX = 0.5
+
+#: the B-spline orders of the image model: 3 (cubic, 4x4 support) or 5 (quintic, 6x6)
+ORDERS = (3, 5)
+#: default interpolation order of the image model
+DEFAULT_ORDER = 3
+#: True when the quintic kernel is compiled (else its numpy twin)
+COMPILED_KERNEL5 = bspline5.COMPILED
 
 _BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
 
@@ -91,6 +109,13 @@ def check_prefilter(prefilter_px: float) -> float:
     if not (np.isfinite(sigma) and sigma >= 0.0):
         raise ValueError(f"prefilter_px must be a finite number >= 0 (px), got {prefilter_px!r}")
     return sigma
+
+
+def check_order(order: int) -> int:
+    """``order`` as an int; raises ValueError unless it is one of :data:`ORDERS` (3 or 5)."""
+    if isinstance(order, (bool, np.bool_)) or order not in ORDERS:
+        raise ValueError(f"interpolation order must be one of {', '.join(map(str, ORDERS))}, got {order!r}")
+    return int(order)
 
 
 def _noise_gain(prefilter_px: float) -> float:
@@ -134,7 +159,7 @@ def _xy(xy: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Image:
-    """A gray-level image and its image model (Gaussian prefilter + cubic B-spline).
+    """A gray-level image and its image model (Gaussian prefilter + cubic or quintic B-spline).
 
     Build it with :meth:`from_array` or :func:`read_image`; the constructor takes the
     coefficients as given (``prefilter_px`` then only records how they were made).
@@ -142,11 +167,13 @@ class Image:
     Attributes
     ----------
     values : (h, w) float64 RAW pixel values (not prefiltered)
-    coefficients : (h, w) cubic B-spline coefficients of the prefiltered values (mirror boundary)
+    coefficients : (h, w) B-spline coefficients (of ``order``) of the prefiltered values
+        (mirror boundary)
     dynamic_range : ``max - min`` of ``values``
     source : file name or label, used in messages
     prefilter_px : standard deviation (px) of the Gaussian applied to ``values`` before the
         spline (0 = none)
+    order : B-spline order of the interpolant, 3 (cubic) or 5 (quintic)
     """
 
     values: np.ndarray
@@ -154,6 +181,7 @@ class Image:
     dynamic_range: float
     source: str = "array"
     prefilter_px: float = 0.0
+    order: int = DEFAULT_ORDER
 
     def __post_init__(self) -> None:
         for field in ("values", "coefficients"):
@@ -172,13 +200,18 @@ class Image:
             object.__setattr__(self, "prefilter_px", check_prefilter(self.prefilter_px))
         except ValueError as err:
             raise ImageError(f"image {self.source!r}: {err}") from None
+        try:
+            object.__setattr__(self, "order", check_order(self.order))
+        except ValueError as err:
+            raise ImageError(f"image {self.source!r}: {err}") from None
         object.__setattr__(self, "dynamic_range", float(self.dynamic_range))
-        padded = np.pad(self.coefficients, _PAD, mode="reflect")   # numpy "reflect" = scipy "mirror"
+        pad = bspline5.PAD if self.order == 5 else _PAD
+        padded = np.pad(self.coefficients, pad, mode="reflect")    # numpy "reflect" = scipy "mirror"
         object.__setattr__(self, "_padded", np.ascontiguousarray(padded).ravel())
 
     @classmethod
     def from_array(cls, a: np.ndarray, source: str = "array",
-                   prefilter_px: float = DEFAULT_PREFILTER_PX) -> "Image":
+                   prefilter_px: float = DEFAULT_PREFILTER_PX, order: int = DEFAULT_ORDER) -> "Image":
         """Image of a 2-D array (h, w) of raw pixel values.
 
         Parameters
@@ -186,12 +219,14 @@ class Image:
         a : (h, w) pixel values (copied)
         source : file name or label, used in messages
         prefilter_px : standard deviation (px) of the Gaussian prefilter of the model
-            (0 = the cubic B-spline through the raw values)
+            (0 = the B-spline through the raw values)
+        order : B-spline order of the interpolant, 3 (cubic) or 5 (quintic)
 
         Raises
         ------
         ImageError
-            For NaN/inf values, a wrong shape, or a negative or non-finite ``prefilter_px``.
+            For NaN/inf values, a wrong shape, a negative or non-finite ``prefilter_px``, or
+            an ``order`` other than 3 or 5.
         """
         values = np.array(a, dtype=np.float64)
         if values.ndim != 2 or min(values.shape) < 1:
@@ -201,12 +236,13 @@ class Image:
             raise ImageError(f"image {source!r}: {bad} non-finite (NaN/inf) pixel values")
         try:
             sigma = check_prefilter(prefilter_px)
+            order = check_order(order)
         except ValueError as err:
             raise ImageError(f"image {source!r}: {err}") from None
         smoothed = ndimage.gaussian_filter(values, sigma, mode="mirror") if sigma > 0 else values
-        coefficients = ndimage.spline_filter(smoothed, order=3, output=np.float64, mode="mirror")
+        coefficients = ndimage.spline_filter(smoothed, order=order, output=np.float64, mode="mirror")
         values.flags.writeable = coefficients.flags.writeable = False   # owned here: no copy
-        return cls(values, coefficients, float(values.max() - values.min()), str(source), sigma)
+        return cls(values, coefficients, float(values.max() - values.min()), str(source), sigma, order)
 
     @property
     def noise_gain(self) -> float:
@@ -221,12 +257,12 @@ class Image:
 
         E.g. to simulate noise through the image model: ``image.with_values(image.values + n)``.
         """
-        return Image.from_array(values, self.source, prefilter_px=self.prefilter_px)
+        return Image.from_array(values, self.source, prefilter_px=self.prefilter_px, order=self.order)
 
     def __repr__(self) -> str:
         h, w = self.values.shape
         return (f"Image(source={self.source!r}, {w}x{h} px, dynamic_range={self.dynamic_range:.6g}, "
-                f"prefilter_px={self.prefilter_px:g})")
+                f"prefilter_px={self.prefilter_px:g}, order={self.order})")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -236,12 +272,13 @@ class Image:
     def evaluate(self, xy: np.ndarray) -> np.ndarray:
         """Gray levels of the model (prefiltered, interpolated) at ``xy`` (n, 2) = (x, y); returns (n,).
 
-        The compiled kernel's value-only pass (the value of :meth:`evaluate_with_gradient`
-        without its gradient), else scipy's :func:`map_coordinates` (the same interpolant).
+        The compiled cubic kernel's value-only pass (the value of :meth:`evaluate_with_gradient`
+        without its gradient), else (no compiler, or ``order`` 5) scipy's
+        :func:`map_coordinates` (the same interpolant).
         """
         xy = _xy(xy)
-        if _bspline is None:
-            return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=3,
+        if _bspline is None or self.order != 3:
+            return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=self.order,
                                            mode="mirror", prefilter=False)
         xy = np.ascontiguousarray(xy)
         h, w = self.values.shape
@@ -256,14 +293,16 @@ class Image:
     def evaluate_with_gradient(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Gray levels (n,) and exact spline gradient (n, 2) = [d/dx, d/dy] at ``xy`` (n, 2).
 
-        ``f = sum_ab c[i+a, j+b] wy_a wx_b`` over the 4x4 support, ``df/dx`` with ``wx'``,
-        ``df/dy`` with ``wy'``. NaN coordinates give NaN.
+        ``f = sum_ab c[i+a, j+b] wy_a wx_b`` over the 4x4 support (6x6 for ``order`` 5),
+        ``df/dx`` with ``wx'``, ``df/dy`` with ``wy'``. NaN coordinates give NaN.
         """
         xy = np.ascontiguousarray(_xy(xy))
         h, w = self.values.shape
         value = np.empty(len(xy))
         grad = np.empty((len(xy), 2))
         kernel = _evaluate_compiled if _bspline is not None else _evaluate_numpy
+        if self.order == 5:
+            kernel = bspline5.evaluate_compiled if bspline5.COMPILED else bspline5.evaluate_numpy
 
         def run(block: slice) -> None:
             kernel(self._padded, h, w, xy[block], value[block], grad[block])
@@ -275,12 +314,15 @@ class Image:
         """Exact gradient (n, 2) = [d/dx, d/dy] of the interpolant at ``xy`` (n, 2)."""
         return self.evaluate_with_gradient(xy)[1]
 
-    def inside(self, xy: np.ndarray, margin: float = 1.5) -> np.ndarray:
+    def inside(self, xy: np.ndarray, margin: float | None = None) -> np.ndarray:
         """(n,) bool: finite points at least ``margin`` px inside the image border.
 
-        The border is the outer edge of the edge pixels (``-0.5`` and ``w - 0.5``).
+        The border is the outer edge of the edge pixels (``-0.5`` and ``w - 0.5``). The
+        default margin, ``order / 2`` (1.5 px cubic, 2.5 px quintic), keeps the points whose
+        spline support reaches no coefficient beyond the first and last pixel centres.
         """
         xy = _xy(xy)
+        margin = 0.5 * self.order if margin is None else margin
         h, w = self.values.shape
         lo = margin - 0.5
         with np.errstate(invalid="ignore"):
@@ -295,7 +337,8 @@ class Image:
             raise ImageError(f"image {self.source!r}: {w}x{h} px is too small to coarsen")
         v = self.values[: h - h % 2, : w - w % 2]
         coarse = v.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
-        return Image.from_array(coarse, f"{self.source} /2", prefilter_px=self.prefilter_px)
+        return Image.from_array(coarse, f"{self.source} /2", prefilter_px=self.prefilter_px,
+                                order=self.order)
 
 
 def _evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
@@ -329,10 +372,12 @@ def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: n
             grad[block][~finite] = np.nan
 
 
-def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_PX) -> Image:
+def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_PX,
+               order: int = DEFAULT_ORDER) -> Image:
     """Read an 8- or 16-bit (or float) TIFF/PNG as gray levels (colour is converted to gray).
 
-    ``prefilter_px``: the Gaussian prefilter of the image model (see :meth:`Image.from_array`).
+    ``prefilter_px``, ``order``: the Gaussian prefilter and the B-spline order of the image
+    model (see :meth:`Image.from_array`).
 
     Raises
     ------
@@ -340,7 +385,7 @@ def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_
         If ``path`` does not exist.
     ImageError
         If OpenCV cannot decode it, or it holds NaN/inf values (or ``prefilter_px`` is
-        negative or not finite).
+        negative or not finite, or ``order`` is not 3 or 5).
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -356,7 +401,7 @@ def read_image(path: str | os.PathLike, prefilter_px: float = DEFAULT_PREFILTER_
             a = a[:, :, :3] @ _BGR_TO_GRAY                        # OpenCV stores BGR(A)
         else:
             raise ImageError(f"image file {path!r}: unsupported {a.shape[2]} channels")
-    image = Image.from_array(a, source=path, prefilter_px=prefilter_px)
+    image = Image.from_array(a, source=path, prefilter_px=prefilter_px, order=order)
     logger.debug("read %s: %dx%d px, range %.6g", path, a.shape[1], a.shape[0], image.dynamic_range)
     return image
 

@@ -51,8 +51,11 @@ A complete example (every key; optional keys show their default in parentheses):
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
     max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
     prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
-                                  # cubic B-spline, >= 0, 0 = none (default 0.5, the core's
+                                  # B-spline, >= 0, 0 = none (default 0.5, the core's
                                   # fesdic_core.image.DEFAULT_PREFILTER_PX)
+    interpolation_order = 3       # image model: B-spline order of the interpolant after the
+                                  # prefilter, 3 (cubic) | 5 (quintic) (default 3, the core's
+                                  # fesdic_core.image.DEFAULT_ORDER)
     edge_margin_px = 2.0          # leave out the points within this many px of the mesh's
                                   # projected boundary, >= 0, 0 = none (default 2, the core's
                                   # fesdic_core.edges.DEFAULT_EDGE_MARGIN_PX)
@@ -73,7 +76,7 @@ from typing import Any
 import numpy as np
 
 from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
-from fesdic_core.image import DEFAULT_PREFILTER_PX
+from fesdic_core.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDERS
 
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
                           existing_file, integer, load_toml, number, resolve_path,
@@ -165,6 +168,7 @@ class MethodConfig:
     max_fixed_point: int = 10
     prefilter_px: float = DEFAULT_PREFILTER_PX
     edge_margin_px: float = DEFAULT_EDGE_MARGIN_PX
+    interpolation_order: int = DEFAULT_ORDER
 
     @property
     def fixed_levels(self) -> int:
@@ -312,7 +316,9 @@ def _method(data: Any, source: Path) -> MethodConfig:
         normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
         max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point),
         prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
-        edge_margin_px=t.take("edge_margin_px", number, "a number (px)", default=d.edge_margin_px))
+        edge_margin_px=t.take("edge_margin_px", number, "a number (px)", default=d.edge_margin_px),
+        interpolation_order=t.take("interpolation_order", integer, "an integer (3 or 5)",
+                                   default=d.interpolation_order))
     t.finish()
     check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
     check(t, "levels", m.levels, m.levels == AUTO or m.levels >= 1, '>= 1 or "auto"')
@@ -325,6 +331,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
     check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "edge_margin_px", m.edge_margin_px, m.edge_margin_px >= 0, ">= 0 (px; 0 = no margin)")
+    check(t, "interpolation_order", m.interpolation_order, m.interpolation_order in ORDERS,
+          " or ".join(map(str, ORDERS)) + " (3 = cubic, 5 = quintic B-spline)")
     return m
 
 

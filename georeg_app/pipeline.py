@@ -337,7 +337,8 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     """
     started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     if images is None:
-        images = tuple(read_image(path, prefilter_px=config.method.prefilter_px)
+        images = tuple(read_image(path, prefilter_px=config.method.prefilter_px,
+                                  order=config.method.interpolation_order)
                        for path in (config.images.cam0, config.images.cam1))
     check_sizes(config, images)
     cameras = load_cameras(config.cameras, images)
@@ -394,7 +395,9 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
     specimen = dataclasses.replace(demo_specimen(), speckle_mm=speckle_mm_for(cams[0], 4.0))
     arrays = render_stereo(specimen, cams, supersample=3, noise_std=DEMO["noise_std"], seed=11,
                            progress=logger.isEnabledFor(logging.INFO) and sys.stderr.isatty())
-    images = tuple(Image.from_array(a, source=f"demo cam{k}") for k, a in enumerate(arrays))
+    method = MethodConfig()
+    images = tuple(Image.from_array(a, source=f"demo cam{k}", prefilter_px=method.prefilter_px,
+                                    order=method.interpolation_order) for k, a in enumerate(arrays))
     rotation = np.radians(DEMO["pose_error_deg"]) * np.array([0.6, -0.48, 0.64])
     translation = DEMO["pose_error_mm"] * np.array([0.48, 0.64, -0.6])
     initial = move_cameras_with_specimen(cams, translation, rotation, np.zeros(3))
@@ -409,7 +412,7 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
         cameras=CamerasConfig(file=inputs / "cameras.json"),
         geometry=GeometryConfig(kind="plate_with_hole", length_mm=DEMO["view_mm"],
                                 width_mm=DEMO["width_mm"], hole_radius_mm=DEMO["hole_radius_mm"]),
-        method=MethodConfig(),
+        method=method,
         output=OutputConfig(dir=Path(out_dir)),
         source=inputs / "demo (embedded)")
     weakref.finalize(config.cameras, shutil.rmtree, inputs, ignore_errors=True)  # kept by copies

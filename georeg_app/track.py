@@ -60,6 +60,7 @@ class SeriesReference:
     solver: object | None
     prefilter_px: float
     label: str
+    interpolation_order: int = 3
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -98,9 +99,9 @@ class TrackRun:
 
 # ----------------------------------------------------------------------------- reference
 def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
-    prefilter = config.method.prefilter_px
-    return tuple(read_image(p, prefilter_px=prefilter) for p in (config.images.cam0,
-                                                                  config.images.cam1))
+    prefilter, order = config.method.prefilter_px, config.method.interpolation_order
+    return tuple(read_image(p, prefilter_px=prefilter, order=order) for p in (config.images.cam0,
+                                                                               config.images.cam1))
 
 
 def load_reference(config: TrackConfig, progress: bool = False
@@ -181,7 +182,8 @@ def series_reference(config: TrackConfig, progress: bool = False) -> SeriesRefer
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
     return SeriesReference(displacement=reference, solver=solver,
-                           prefilter_px=config.method.prefilter_px, label=label)
+                           prefilter_px=config.method.prefilter_px, label=label,
+                           interpolation_order=config.method.interpolation_order)
 
 
 # ----------------------------------------------------------------------------- frames
@@ -192,7 +194,8 @@ def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
     t0 = time.perf_counter()
     names = [str(p) for p in paths]
     try:
-        images = [read_image(p, prefilter_px=reference.prefilter_px) for p in paths]
+        images = [read_image(p, prefilter_px=reference.prefilter_px, order=reference.interpolation_order)
+                  for p in paths]
         solver = copy.deepcopy(reference.solver)
         m = measure_displacement(reference.displacement, images, solver, U0)
     except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:

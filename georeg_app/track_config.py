@@ -11,7 +11,7 @@ A complete example (optional keys show their default in parentheses)::
     [cameras]                     # as `georeg measure` (required without [reference])
     [geometry]                    # as `georeg measure` (required without [reference])
     [method]                      # as `georeg measure`: the shape of the reference, and
-                                  # prefilter_px / normalisation of every frame
+                                  # prefilter_px / interpolation_order / normalisation of every frame
 
     [series]                      # required: the deformed stereo pairs, in order
     cam0 = "frames/cam0_*.tif"    # a glob (natural sort: 2 before 10) or a list of paths

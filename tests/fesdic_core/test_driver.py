@@ -168,6 +168,17 @@ def test_images_of_different_sizes_are_named(twisted_scene):
     assert "636 x 478" in str(info.value)
 
 
+@pytest.mark.parametrize("model", [{"order": 5}, {"prefilter_px": 0.9}])
+def test_images_of_different_image_models_are_named(twisted_scene, model):
+    """The residual compares the two interpolants: one pair, one image model."""
+    _, cameras, images = twisted_scene
+    mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")
+    left = Image.from_array(images[0].values, source="left.tif")
+    right = Image.from_array(images[1].values, source="right.tif", **model)
+    with pytest.raises(MeasurementInputError, match=r"different image models.*left\.tif.*right\.tif"):
+        measure(mesh, (left, right), cameras)
+
+
 def test_image_and_camera_sizes_must_match(twisted_scene):
     _, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")

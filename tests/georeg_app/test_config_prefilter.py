@@ -1,5 +1,5 @@
-"""georeg_app.config: the image model's ``[method] prefilter_px`` and ``edge_margin_px`` (issue 13)
-and their checks."""
+"""georeg_app.config: the image model's ``[method] prefilter_px``, ``interpolation_order`` and
+``edge_margin_px`` (issue 13) and their checks."""
 import textwrap
 from pathlib import Path
 
@@ -7,7 +7,7 @@ import pytest
 
 from fesdic_core.driver import MeasurementSettings
 from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
-from fesdic_core.image import DEFAULT_PREFILTER_PX
+from fesdic_core.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX
 from georeg_app.config import ConfigError, MethodConfig, load_config
 
 BASE = """
@@ -59,6 +59,14 @@ def test_image_model_settings_are_read(tmp_path, text, value):
     ("edge_margin_px = -1", "[method] edge_margin_px: must be >= 0 (px; 0 = no margin), got -1"),
     ("edge_margin_px = nan", "[method] edge_margin_px: expected a number (px), got nan"),
     ('edge_margin_px = "2"', '[method] edge_margin_px: expected a number (px), got "2"'),
+    ("interpolation_order = 4", "[method] interpolation_order: must be 3 or 5 (3 = cubic, 5 = quintic "
+                                "B-spline), got 4"),
+    ("interpolation_order = 1", "[method] interpolation_order: must be 3 or 5"),
+    ("interpolation_order = 5.0", "[method] interpolation_order: expected an integer (3 or 5), got 5.0"),
+    ('interpolation_order = "quintic"', '[method] interpolation_order: expected an integer (3 or 5), '
+                                        'got "quintic"'),
+    ("interpolation_order = true", "[method] interpolation_order: expected an integer (3 or 5), got true"),
+    ("order = 5", "[method] order: unknown key"),
 ])
 def test_bad_image_model_settings_are_refused_naming_the_key(tmp_path, text, expected):
     with pytest.raises(ConfigError) as info:
@@ -75,17 +83,25 @@ def test_the_pipeline_reads_the_images_with_the_configured_prefilter(tmp_path, m
     class Stop(Exception):
         pass
 
-    def fake_read_image(path, prefilter_px):
-        seen.append((Path(path).name, prefilter_px))
-        if len(seen) == 2:
+    def fake_read_image(path, prefilter_px, order):
+        seen.append((Path(path).name, prefilter_px, order))
+        if len(seen) % 2 == 0:
             raise Stop
         return None
 
     monkeypatch.setattr(pipeline, "read_image", fake_read_image)
-    config = _load(tmp_path, "prefilter_px = 0.7")
-    with pytest.raises(Stop):
-        pipeline.run_methods(config, [])
-    assert seen == [("left.tif", 0.7), ("right.tif", 0.7)]
+    for text in ("prefilter_px = 0.7", "prefilter_px = 0.7\ninterpolation_order = 5"):
+        with pytest.raises(Stop):
+            pipeline.run_methods(_load(tmp_path, text), [])
+    assert seen == [("left.tif", 0.7, 3), ("right.tif", 0.7, 3), ("left.tif", 0.7, 5), ("right.tif", 0.7, 5)]
+
+
+@pytest.mark.parametrize("text, order", [("", DEFAULT_ORDER), ("interpolation_order = 3", 3),
+                                         ("interpolation_order = 5", 5)])
+def test_interpolation_order_is_read(tmp_path, text, order):
+    m = _load(tmp_path, text).method
+    assert m.interpolation_order == order and isinstance(m.interpolation_order, int)
+    assert MethodConfig().interpolation_order == DEFAULT_ORDER == 3
 
 
 def test_edge_margin_default_is_the_core_default(tmp_path):

@@ -262,3 +262,31 @@ def test_an_unknown_jacobian_is_named(series, tmp_path, capsys):
     config = _config(folder, displacement='method = "fe"\njacobian = "deformed"')
     _fails_naming(capsys, config, tmp_path / "out", "[displacement]", "jacobian", "deformed",
                   '"reference"', '"current"')
+
+
+def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(monkeypatch):
+    """``[method] prefilter_px`` and ``interpolation_order`` reach the reference pair and the
+    frames (one image model for every pair the displacement compares)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from georeg_app import track
+    from georeg_app.config import MethodConfig
+
+    seen = []
+
+    def fake_read_image(path, prefilter_px, order):
+        seen.append((path, prefilter_px, order))
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(track, "read_image", fake_read_image)
+    method = MethodConfig(prefilter_px=0.7, interpolation_order=5)
+    config = SimpleNamespace(method=method, images=SimpleNamespace(cam0="a.png", cam1="b.png"))
+    with pytest.raises(ValueError, match="stop here"):
+        track._reference_images(config)
+    reference = track.SeriesReference(displacement=None, solver=None, prefilter_px=0.7, label="ref",
+                                      interpolation_order=5)
+    result = track.measure_frame(reference, 1, ["c.png", "d.png"], None, 0)
+    assert result.failure and "stop here" in result.failure
+    assert seen == [("a.png", 0.7, 5), ("c.png", 0.7, 5)]
+    assert dataclasses.fields(track.SeriesReference)[-1].default == 3
