@@ -282,7 +282,8 @@ def ours(folder: Path, method: str, arrays):
     t0 = time.perf_counter()
     config = load_config(folder / f"{method}.toml")
     images = tuple(Image.from_array(np.asarray(a, float), source=f"cam{k}",
-                                    prefilter_px=config.method.prefilter_px)
+                                    prefilter_px=config.method.prefilter_px,
+                                    order=config.method.interpolation_order)
                    for k, a in enumerate(arrays))
     result = run_methods(config, measure_specs(config), images=images).results[0]
     seconds = time.perf_counter() - t0
