@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parents[1] / "tests")]   # the packages before tests/, whose folders mirror them
 import scenes  # noqa: E402
 from shape_truth import bounded_shape_error, rms  # noqa: E402
 

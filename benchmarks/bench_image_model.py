@@ -64,7 +64,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))          # tests/scenes.py: the bump specimen
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]   # the packages before tests/, whose folders mirror them
 
 from fesdic_core.accuracy import shape_error_to_surface            # noqa: E402
 from fesdic_core.driver import MeasurementSettings, measure          # noqa: E402

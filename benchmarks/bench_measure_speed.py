@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))              # tests/scenes.py (the family scene)
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]   # the packages before tests/, whose folders mirror them
 
 from adapters.fesdic_core import georeg_solver, nominal_model  # noqa: E402
 from fesdic_core import driver, quadrature, shape, uncertainty  # noqa: E402

@@ -164,7 +164,7 @@ class Case:
 
 
 def build_case(shape: str) -> Case:
-    sys.path.insert(0, str(REPO / "tests"))
+    sys.path[:0] = [str(REPO), str(REPO / "tests")]   # the packages before tests/, whose folders mirror them
     import scenes
     from fesdic_core.render import demo_cameras, speckle_mm_for
     from georeg_app.config import GeometryConfig
@@ -415,7 +415,7 @@ def run_real(args, folder: Path) -> list[dict]:
 def errors_um(points_world: np.ndarray, case: Case, camera, inner) -> tuple[float, float]:
     """RMS distance (um) to the truth after the bounded rigid alignment: all points, and the
     points of the region pyvale can measure (aligned on their own)."""
-    sys.path.insert(0, str(REPO / "tests"))
+    sys.path[:0] = [str(REPO), str(REPO / "tests")]   # the packages before tests/, whose folders mirror them
     from shape_truth import bounded_shape_error, rms
     same = in_region(points_world, camera, inner)
     return (1e3 * rms(bounded_shape_error(points_world, case.specimen)),
