@@ -71,10 +71,13 @@ class MeasurementSettings:
     uncertainty : at the end, estimate the noise model and the shape's standard deviation
         and bias indicator (:mod:`fesdic_core.uncertainty`); costs about two Gauss-Newton
         iterations at the finest scale.
-    edge_margin_px : leave out the points that project within this many pixels (of the
-        full-resolution images; halved at each coarser scale) of the mesh's boundary in
-        either camera, where the image model mixes the speckle with what lies beyond the
-        edge (:mod:`fesdic_core.edges`); 0 keeps them.
+    edge_margin_px : at the finest scale of ``scales``, leave out the points that project
+        within this many pixels (of the full-resolution images, scaled to that scale) of the
+        mesh's boundary in either camera, where the image model mixes the speckle with what
+        lies beyond the edge (:mod:`fesdic_core.edges`); 0 keeps them. The coarser scales
+        keep every point: they only start the next scale, and their elements are a few
+        pixels wide, so a margin there took most of a boundary element's points and threw
+        the boundary nodes of plain FE off by tenths of a millimetre.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -327,9 +330,9 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         X_now = quad.points(nodes_now)
         mask = None if visibility is None else visibility(X_now, scaled)
-        if settings.edge_margin_px > 0:          # the image model's band across the boundary
-            keep = edge_margin_mask(X_now, quad, mesh, nodes_now, scaled,
-                                    settings.edge_margin_px / 2.0 ** scale)
+        if settings.edge_margin_px > 0 and k == len(settings.scales):   # the finest scale:
+            keep = edge_margin_mask(X_now, quad, mesh, nodes_now, scaled,  # the image model's
+                                    settings.edge_margin_px / 2.0 ** scale)  # band at the edge
             mask = keep if mask is None else mask & keep
         # the first residual of the scale also starts its first calibration (or shape) step
         first = gray_level_residual(X_now, quad, imgs, scaled, settings.normalisation,
