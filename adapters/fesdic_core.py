@@ -165,13 +165,14 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
                         ) -> MultilevelSpace:
     """The operators ``C_s`` of ``n_levels`` spline levels for the core's mesh (Eq. 28).
 
-    ``curved``: True, the vector formulation of :mod:`georeg_plugin.curved` for a shape
-    unknown along the core's node normals (control vectors seen along the normals: nested
-    levels, rigid normal motions in range); False (default), the scalar spline space
-    ``C^T[I, J] = R_J(xi_I)`` (e.g. each component of a displacement); None chooses the
-    vector formulation when the nominal surface is not planar (:func:`is_curved`), the
-    scalar one on a flat one (on which both have the same range). A part of several faces
-    always gets the vector formulation.
+    ``curved``: True, a shape unknown along the core's node normals on a curved face: the
+    scalar spline space when it holds the rigid normal motions
+    (:func:`scalar_holds_rigid_motions`: a cylinder), else the vector formulation of
+    :mod:`georeg_plugin.curved` (control vectors seen along the normals; both: nested levels,
+    rigid normal motions in range); False (default), the scalar spline space
+    ``C^T[I, J] = R_J(xi_I)`` (e.g. each component of a displacement); None: True when the
+    nominal surface is not planar (:func:`is_curved`). A part of several faces always gets
+    the vector formulation.
     For a mesh made from the spline (``model.uv``) the
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
@@ -182,13 +183,46 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
                           node_normals(model.mesh))
     if curved is None:
         curved = is_curved(model)
-    normals = node_normals(model.mesh) if curved else None
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
-    space = multilevel_space(model.patch, n_levels, model.mesh.nodes, node_normals=normals,
-                             uv=model.uv, family=family)
+    space = multilevel_space(model.patch, n_levels, model.mesh.nodes, uv=model.uv, family=family)
+    if curved and not scalar_holds_rigid_motions(model, space):
+        space = multilevel_space(model.patch, n_levels, model.mesh.nodes,
+                                 node_normals=node_normals(model.mesh), uv=model.uv, family=family)
     if model.uv is not None:
         check_nested_mesh(model, space.patch(0), f"the finest of {n_levels} spline levels")
     return space
+
+
+#: the rigid normal modes must lie in the scalar space to this relative accuracy
+RIGID_RTOL = 1e-8
+
+
+def scalar_holds_rigid_motions(model: NominalModel, space: MultilevelSpace) -> bool:
+    """True if the scalar spline space (``C^T[I, J] = R_J(xi_I)``) of a curved face holds its
+    rigid normal motions ``n(xi_I) . (a + w x X_I)`` at every level (its coarsest level holds
+    them: the levels are nested, Eq. 13), to :data:`RIGID_RTOL` with the surface's exact normals.
+
+    A face whose normal components are rational functions of the NURBS's own degree does: a
+    cylinder or a cone (the normal is affine in the point along each ruling; measured 1e-13).
+    A doubly curved face does not (7e-4 on a paraboloid patch). Where it holds, the scalar
+    space is the curved nominal's (nested, rigid-complete, one dof per control point); the
+    vector formulation (:mod:`georeg_plugin.curved`) has the same properties with about twice
+    the dofs, whose extra directions cost accuracy: on the Stereo DIC Challenge's bars its
+    cylinder-fit residual was 2.5 / 3.4 um against 1.8 / 2.7 um with the scalar space, on the
+    rendered cylindrical panel 1.13 against 0.76 um (``benchmarks/bench_cad_parts.py``).
+    """
+    if model.uv is None:                  # no node parameters: no exact normals to check with
+        return False
+    n = np.asarray(model.patch.normals(model.uv), dtype=float)
+    X = np.asarray(model.mesh.nodes, dtype=float)
+    rigid = np.hstack([n, np.cross(X, n)])                   # n . a and n . (w x X) = w . (X x n)
+    C = space.operators[-1].toarray()                        # the coarsest level (m, n_fe)
+    coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
+    residual = np.abs(rigid - C.T @ coeffs).max() / np.abs(rigid).max()
+    logger.info("curved nominal: rigid normal motions outside the scalar spline space %.2g "
+                "(tolerance %.0e): the %s formulation", residual, RIGID_RTOL,
+                "scalar" if residual <= RIGID_RTOL else "vector")
+    return bool(residual <= RIGID_RTOL)
 
 
 def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int] | None = None,

@@ -2,8 +2,9 @@
 
 The file's untrimmed B-spline surfaces (entity 128, placed by their entities 124; see
 :mod:`georeg_plugin.iges`) are the faces; ``faces`` picks some of them by index (directory
-order) or name. One face: the one-patch model of the plates (curved: vector formulation,
-:mod:`georeg_plugin.curved`). Several: one FE mesh over all of them, welded along shared
+order) or name. One face: the one-patch model of the plates (curved: the scalar spline
+space if it holds the rigid normal motions, a cylinder; else the vector formulation of
+:mod:`georeg_plugin.curved`; see ``adapters.fesdic_core.multilevel_for_mesh``). Several: one FE mesh over all of them, welded along shared
 edges, spline levels glued there (:mod:`georeg_plugin.multipatch`). STEP needs a CAD kernel
 (the future optional ``cad`` extra) and is refused with that message. A face of degree
 above 2 (bicubic CAD) goes through the part's mesh (nodes placed on the surface, Eq. 16

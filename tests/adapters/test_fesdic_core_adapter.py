@@ -92,12 +92,29 @@ def test_legacy_mesh_measures_through_point_inversion_and_the_georeg_solver(
 
 
 def test_the_formulation_follows_the_nominal_flat_scalar_curved_vector():
-    """A flat nominal keeps the scalar operators (bit for bit); a curved one gets the vector
-    formulation with the core's node normals: nested, rigid normal modes in range, and the
-    measured NURBS (P_J + d_J) reproduces the nodal field at the nodes."""
+    """A flat nominal keeps the scalar operators (bit for bit). A cylinder keeps the scalar
+    space too: it holds the rigid normal motions (exact surface normals) and is nested. A
+    doubly curved face, whose scalar space misses them, gets the vector formulation with the
+    core's node normals: nested, rigid normal modes in range, and the measured NURBS
+    (P_J + d_J) reproduces the nodal field at the nodes."""
     from adapters.fesdic_core import is_curved, measured_spline, multilevel_for_mesh
     from fesdic_core.mesh import node_normals
     from georeg_plugin.geometries import cylinder
+    from georeg_plugin.patch import SplinePatch
+
+    def rigid_modes(n, X):
+        return np.column_stack([n] + [np.einsum("kd,kd->k", n, np.cross(e, X)) for e in np.eye(3)])
+
+    def nested_and_rigid(space, rigid):
+        for s, C in enumerate(space.operators):
+            C = C.toarray()
+            coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
+            assert np.abs(rigid - C.T @ coeffs).max() < 1e-12 * np.abs(rigid).max()
+            if s + 1 < space.n_levels:
+                Cc = space.operators[s + 1].toarray()
+                coarse_in_fine, *_ = np.linalg.lstsq(C.T, Cc.T, rcond=None)
+                assert np.abs(Cc.T - C.T @ coarse_in_fine).max() < 1e-10
+
     flat = nominal_model(plate_with_hole(L, W, 10.0), 2, "Q9")
     space = multilevel_for_mesh(flat, 2, curved=None)
     reference = multilevel_space(flat.patch, 2, flat.mesh.nodes, uv=flat.uv, family="Q9")
@@ -106,20 +123,20 @@ def test_the_formulation_follows_the_nominal_flat_scalar_curved_vector():
         assert (C != R).nnz == 0
     panel = nominal_model(cylinder(100.0, 40.0, 30.0), 3, "Q9")
     space = multilevel_for_mesh(panel, 3, curved=None)
-    assert not multilevel_for_mesh(panel, 3).vector     # default: the scalar space
-    assert is_curved(panel) and space.vector
-    n, X = node_normals(panel.mesh), panel.mesh.nodes
-    rigid = np.column_stack([n] + [np.einsum("kd,kd->k", n, np.cross(e, X)) for e in np.eye(3)])
-    for s, C in enumerate(space.operators):
-        C = C.toarray()
-        assert np.abs(rigid - C.T @ (C @ rigid)).max() < 1e-12 * np.abs(rigid).max()
-        if s + 1 < space.n_levels:
-            Cc = space.operators[s + 1].toarray()
-            assert np.abs(Cc.T - C.T @ (C @ Cc.T)).max() < 1e-10
+    assert is_curved(panel) and not space.vector                # a cylinder: the scalar space
+    nested_and_rigid(space, rigid_modes(panel.patch.normals(panel.uv), panel.mesh.nodes))
+    U, V = np.meshgrid(np.linspace(-20, 20, 3), np.linspace(-15, 15, 3), indexing="ij")
+    k = np.array([0, 0, 0, 1, 1, 1.0])                           # an elliptic paraboloid, twisted
+    dome = nominal_model(SplinePatch((2, 2), (k, k), np.stack(
+        [U, V, 0.004 * U ** 2 + 0.006 * V ** 2 + 0.002 * U * V], -1)), 3, "Q9")
+    space = multilevel_for_mesh(dome, 3, curved=None)
+    assert is_curved(dome) and space.vector                     # doubly curved: the vector one
+    n = node_normals(dome.mesh)
+    nested_and_rigid(space, rigid_modes(n, dome.mesh.nodes))
     solver = GeometricRegularization(space)
     q = space.operators[1].T @ np.random.default_rng(0).standard_normal(space.operators[1].shape[0])
     q *= 0.01 / np.abs(q).max()                                  # 10 um: linear regime
     spline, values = measured_spline(solver, q, 1)
-    moved = spline.evaluate(panel.uv) - space.patch(1).evaluate(panel.uv)
+    moved = spline.evaluate(dome.uv) - space.patch(1).evaluate(dome.uv)
     assert_allclose(np.einsum("kd,kd->k", moved, n), q, atol=1e-12)
     assert values.shape == (space.patch(1).n_dofs,)
