@@ -4,8 +4,8 @@
 ``scipy.ndimage.spline_filter(order=5, mode="mirror")`` (computed by the image), evaluated
 with its exact gradient by one 6x6 tensor-product sum over the coefficients (nodes
 ``i-2 .. i+3`` in each direction) read from a copy padded by :data:`PAD` = 3 on each side.
-The sum runs in the compiled kernel ``fesdic_core._bspline5`` (the quintic counterpart of
-``_bspline``) or, without a C compiler at install, in the numpy twin
+The sum runs in the compiled kernel ``fesdic_core._bspline.evaluate5`` (beside the cubic
+``evaluate``, sharing its fold and its checks) or, without a C compiler at install, in the numpy twin
 :func:`evaluate_numpy` (same arithmetic, about 20x slower). Coordinates are folded into
 ``[0, n - 1]`` by the mirror symmetry, as for the cubic (:func:`fesdic_core.image._fold`).
 """
@@ -14,14 +14,14 @@ from __future__ import annotations
 import numpy as np
 
 try:
-    from . import _bspline5                      # compiled at install (setup.py), optional
+    from . import _bspline                       # compiled at install (setup.py), optional
 except ImportError:                              # pragma: no cover - no C compiler at install
-    _bspline5 = None
+    _bspline = None
 
 __all__ = ["COMPILED", "PAD", "weights", "evaluate_compiled", "evaluate_numpy"]
 
 #: True when the compiled 6x6 kernel is in use (else the numpy twin)
-COMPILED = _bspline5 is not None
+COMPILED = _bspline is not None
 #: coefficient padding: covers the 6x6 support of x in [0, n - 1]
 PAD = 3
 _BLOCK = 1 << 14                                 # points per block of the numpy twin (bounds memory)
@@ -48,7 +48,7 @@ def evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value:
 
     ``padded``: the (h, w) coefficients padded by :data:`PAD` (numpy "reflect"), raveled.
     """
-    _bspline5.evaluate(padded, h, w, PAD, xy, value, grad)
+    _bspline.evaluate5(padded, h, w, PAD, xy, value, grad)
 
 
 def evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,

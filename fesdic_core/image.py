@@ -39,7 +39,7 @@ The interpolation order is a setting too (``order``, :data:`ORDERS`; default
 :data:`DEFAULT_ORDER` = 3): ``order=5`` interpolates by the quintic B-spline
 ``sum_kl c_kl b5(y - k) b5(x - l)`` (coefficients by ``spline_filter(order=5)``, same
 mirror boundary), whose value and gradient are one 6x6 sum, compiled in
-``fesdic_core._bspline5`` (numpy twin in :mod:`fesdic_core.bspline5`; 2-3x the cubic's time).
+``fesdic_core._bspline.evaluate5`` (numpy twin in :mod:`fesdic_core.bspline5`; 2-3x the cubic's time).
 Its sub-pixel bias is lower (``benchmarks/bench_interpolation_bias.py``), but end to end
 it changes the shape errors by a few percent at most (``bench_image_model.py --orders 3 5``,
 README "Interpolation bias"); its support is one pixel wider on each side, so
@@ -272,20 +272,21 @@ class Image:
     def evaluate(self, xy: np.ndarray) -> np.ndarray:
         """Gray levels of the model (prefiltered, interpolated) at ``xy`` (n, 2) = (x, y); returns (n,).
 
-        The compiled cubic kernel's value-only pass (the value of :meth:`evaluate_with_gradient`
-        without its gradient), else (no compiler, or ``order`` 5) scipy's
-        :func:`map_coordinates` (the same interpolant).
+        The compiled kernel's value-only pass (the value of :meth:`evaluate_with_gradient`
+        without its gradient), else (no compiler) scipy's :func:`map_coordinates` (the same
+        interpolant).
         """
         xy = _xy(xy)
-        if _bspline is None or self.order != 3:
+        if _bspline is None:
             return ndimage.map_coordinates(self.coefficients, [xy[:, 1], xy[:, 0]], order=self.order,
                                            mode="mirror", prefilter=False)
         xy = np.ascontiguousarray(xy)
         h, w = self.values.shape
         value = np.empty(len(xy))
+        kernel, pad = (_bspline.evaluate5, bspline5.PAD) if self.order == 5 else (_bspline.evaluate, _PAD)
 
         def run(block: slice) -> None:
-            _bspline.evaluate(self._padded, h, w, _PAD, xy[block], value[block], None)
+            kernel(self._padded, h, w, pad, xy[block], value[block], None)
 
         for_each_block(run, len(xy), _PARALLEL_BLOCK)
         return value
