@@ -24,7 +24,6 @@ __all__ = ["COMPILED", "PAD", "weights", "evaluate_compiled", "evaluate_numpy"]
 COMPILED = _bspline is not None
 #: coefficient padding: covers the 6x6 support of x in [0, n - 1]
 PAD = 3
-_BLOCK = 1 << 14                                 # points per block of the numpy twin (bounds memory)
 
 #: 120 w_a(t) = sum_p _POLY[a, p] t^p: b5 at the distances t+2, t+1, t, 1-t, 2-t, 3-t
 _POLY = np.array([[1, -5, 10, -10, 5, -1],
@@ -53,24 +52,6 @@ def evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value:
 
 def evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
                    grad: np.ndarray) -> None:
-    """The numpy twin of the compiled kernel (blocks of points to bound memory); NaN in, NaN out."""
-    from .image import _fold                     # here: image imports this module
-    stencil = (np.arange(6)[:, None] * (w + 2 * PAD) + np.arange(6)).ravel()
-    for start in range(0, len(xy), _BLOCK):
-        block = slice(start, start + _BLOCK)
-        finite = np.isfinite(xy[block]).all(axis=1)
-        pts = np.where(finite[:, None], xy[block], 0.0)
-        x, sx = _fold(pts[:, 0], w)
-        y, sy = _fold(pts[:, 1], h)
-        i, j = np.floor(y), np.floor(x)
-        wy, dwy = weights(y - i)
-        wx, dwx = weights(x - j)
-        corner = (i.astype(np.int64) + PAD - 2) * (w + 2 * PAD) + j.astype(np.int64) + PAD - 2
-        c = padded.take(corner[:, None] + stencil).reshape(-1, 6, 6)
-        cx = np.einsum("nab,nb->na", c, wx)
-        cdx = np.einsum("nab,nb->na", c, dwx)
-        value[block] = np.einsum("na,na->n", wy, cx)
-        grad[block, 0] = sx * np.einsum("na,na->n", wy, cdx)
-        grad[block, 1] = sy * np.einsum("na,na->n", dwy, cx)
-        value[block][~finite] = np.nan
-        grad[block][~finite] = np.nan
+    """The numpy twin of the compiled kernel (the image model's tensor sum with these weights)."""
+    from .image import tensor_sum_numpy          # here: image imports this module
+    tensor_sum_numpy(padded, h, w, PAD, xy, value, grad, weights, 6)

@@ -350,8 +350,20 @@ def _evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value
 
 def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
                     grad: np.ndarray) -> None:
-    """The numpy twin of the compiled kernel (blocks of points to bound memory)."""
-    stencil = (np.arange(4)[:, None] * (w + 2 * _PAD) + np.arange(4)).ravel()
+    """The numpy twin of the compiled cubic kernel."""
+    tensor_sum_numpy(padded, h, w, _PAD, xy, value, grad, _cubic_weights, 4)
+
+
+def tensor_sum_numpy(padded: np.ndarray, h: int, w: int, pad: int, xy: np.ndarray,
+                     value: np.ndarray, grad: np.ndarray, weights, size: int) -> None:
+    """Value and gradient of a B-spline of ``size`` x ``size`` support (4: cubic, 6: quintic)
+    at ``xy``: the numpy twin of the compiled kernels (blocks of points to bound memory).
+
+    ``padded``: the (h, w) coefficients padded by ``pad`` and raveled; ``weights(t)`` the
+    1-D weights of the nodes ``i - size/2 + 1 .. i + size/2`` and their derivatives.
+    """
+    stencil = (np.arange(size)[:, None] * (w + 2 * pad) + np.arange(size)).ravel()
+    first = pad - size // 2 + 1                   # offset of the support's first node
     for start in range(0, len(xy), _BLOCK):
         block = slice(start, start + _BLOCK)
         finite = np.isfinite(xy[block]).all(axis=1)
@@ -359,10 +371,10 @@ def _evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: n
         x, sx = _fold(pts[:, 0], w)
         y, sy = _fold(pts[:, 1], h)
         i, j = np.floor(y), np.floor(x)
-        wy, dwy = _cubic_weights(y - i)
-        wx, dwx = _cubic_weights(x - j)
-        corner = (i.astype(np.int64) + _PAD - 1) * (w + 2 * _PAD) + j.astype(np.int64) + _PAD - 1
-        c = padded.take(corner[:, None] + stencil).reshape(-1, 4, 4)
+        wy, dwy = weights(y - i)
+        wx, dwx = weights(x - j)
+        corner = (i.astype(np.int64) + first) * (w + 2 * pad) + j.astype(np.int64) + first
+        c = padded.take(corner[:, None] + stencil).reshape(-1, size, size)
         cx = np.einsum("nab,nb->na", c, wx)
         cdx = np.einsum("nab,nb->na", c, dwx)
         value[block] = np.einsum("na,na->n", wy, cx)
