@@ -17,6 +17,7 @@ from typing import Mapping
 import numpy as np
 
 from fesdic_core.elements import family_from_meshio
+from fesdic_core.gauge import rigid_normal_modes
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
 from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
@@ -213,9 +214,8 @@ def scalar_holds_rigid_motions(model: NominalModel, space: MultilevelSpace) -> b
     """
     if model.uv is None:                  # no node parameters: no exact normals to check with
         return False
-    n = np.asarray(model.patch.normals(model.uv), dtype=float)
-    X = np.asarray(model.mesh.nodes, dtype=float)
-    rigid = np.hstack([n, np.cross(X, n)])                   # n . a and n . (w x X) = w . (X x n)
+    rigid, _ = rigid_normal_modes(np.asarray(model.mesh.nodes, dtype=float),
+                                  np.asarray(model.patch.normals(model.uv), dtype=float))
     C = space.operators[-1].toarray()                        # the coarsest level (m, n_fe)
     coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
     residual = np.abs(rigid - C.T @ coeffs).max() / np.abs(rigid).max()
