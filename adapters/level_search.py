@@ -39,6 +39,7 @@ from fesdic_core.shape import shape_gauss_newton
 from fesdic_core.solvers import seen_dofs
 from fesdic_core.uncertainty import linearised_state
 from fesdic_core.mesh import node_normals
+from georeg_plugin.multipatch import part_space
 from georeg_plugin.operators import MultilevelSpace, nested_space
 from georeg_plugin.refine import insert_knots, refine_uniform
 from georeg_plugin.selection import (LevelTrial, information_criterion, noise_gain, penalty_per_dof,
@@ -98,6 +99,15 @@ def _halved(breaks: np.ndarray, keep: np.ndarray) -> np.ndarray:
     return np.unique(np.round(np.concatenate([breaks[::2], breaks[-1:], keep]), 12))
 
 
+def part_levels(model: NominalModel) -> int:
+    """The most dyadic levels a part's FE mesh holds (Eq. 16): ``k`` with ``4^(k-1)`` FE
+    elements per coarse knot span on the face that has fewest (:func:`part_model` meshes
+    have ``4^r`` after ``r`` refinements: ``r + 1`` levels)."""
+    ratios = [np.count_nonzero(model.element_face == f) / np.prod(face.n_elements)
+              for f, face in enumerate(model.faces)]
+    return 1 + max(0, int(np.floor(np.log(min(ratios)) / np.log(4.0) + 1e-9)))
+
+
 def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
     """The nested levels from the nominal spline to the spline of the FE mesh (``C_FE``).
 
@@ -107,8 +117,13 @@ def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
     (Eq. 13) whatever the number of elements (a dyadic mesh gives the paper's levels of
     Eq. 28; 40 elements give 40, 20, 10, 5 spans and the nominal). For a legacy mesh (no
     node parameters): dyadic refinements of the nominal with at most a quarter as many
-    dofs as the mesh has nodes (a Q9 mesh has about four nodes per spline dof).
+    dofs as the mesh has nodes (a Q9 mesh has about four nodes per spline dof). A part of
+    several faces (:func:`part_model`): every face refined dyadically together, glued
+    (:func:`~georeg_plugin.multipatch.part_space`), up to the mesh's resolution.
     """
+    if model.is_part:                      # several faces: dyadic levels of every face
+        return part_space(model.faces, part_levels(model), model.uv, model.node_face,
+                          node_normals(model.mesh))
     patches, refinements = [model.patch], []
     if model.uv is None:
         while len(patches) < 12:

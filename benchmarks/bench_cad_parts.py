@@ -79,8 +79,8 @@ def operators_table() -> None:
 def parts_table(elements: int) -> None:
     scales = (1, 0)
     print("\n| part | FE | Tik 2 mm | Tik 5 mm | Tik 10 mm | Tik auto | georeg 2 | georeg 3 | "
-          "scalar 2 | scalar 3 |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "georeg auto | scalar 2 | scalar 3 |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for part in ("panel", "folded"):
         scene = scenes.cad_scene(part)
         folder = Path(tempfile.mkdtemp(prefix="bench_cad_"))
@@ -88,7 +88,7 @@ def parts_table(elements: int) -> None:
         write_iges(folder / "part.igs", faces)
         write_cameras_json(folder / "cameras.json", scene.cameras)
         row = []
-        for levels in (2, 3):
+        for levels in (2, 3, "auto"):
             config = Config(images=ImagesConfig(folder / "0.png", folder / "1.png"),
                             cameras=CamerasConfig(file=folder / "cameras.json"),
                             geometry=GeometryConfig(kind="cad", file=folder / "part.igs",

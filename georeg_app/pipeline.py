@@ -345,9 +345,6 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     method = config.method
     model = build_model(config.geometry, method.fixed_levels)
     check_levels(model, method.fixed_levels, config.geometry)
-    if model.is_part and any(spec.levels == AUTO for spec in specs):
-        raise ValueError('[method] levels = "auto": the level search takes one patch; a part '
-                         f"of {len(model.faces)} faces needs a number of levels")
     logger.info("nominal model: %s, %d Q9 nodes, %d elements", config.geometry.kind,
                 model.mesh.n_nodes, model.mesh.n_elements)
     results = []
