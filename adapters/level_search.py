@@ -46,7 +46,7 @@ from georeg_plugin.selection import (LevelTrial, information_criterion, noise_ga
                                      predicted_fit)
 from georeg_plugin.solver import GeometricRegularization
 
-from .fesdic_core import NominalModel
+from .fesdic_core import NominalModel, is_curved, scalar_holds_rigid_motions
 
 logger = logging.getLogger(__name__)
 
@@ -108,7 +108,7 @@ def part_levels(model: NominalModel) -> int:
     return 1 + max(0, int(np.floor(np.log(min(ratios)) / np.log(4.0) + 1e-9)))
 
 
-def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
+def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
     """The nested levels from the nominal spline to the spline of the FE mesh (``C_FE``).
 
     From the spline whose knot spans are the FE elements (Eq. 17) down: each coarser level
@@ -120,6 +120,10 @@ def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
     dofs as the mesh has nodes (a Q9 mesh has about four nodes per spline dof). A part of
     several faces (:func:`part_model`): every face refined dyadically together, glued
     (:func:`~georeg_plugin.multipatch.part_space`), up to the mesh's resolution.
+
+    ``curved``: the formulation, as :func:`~adapters.fesdic_core.multilevel_for_mesh`'s; None
+    (default): scalar on a flat face or one whose scalar space holds the rigid normal motions
+    (a cylinder), else the vector formulation.
     """
     if model.is_part:                      # several faces: dyadic levels of every face
         return part_space(model.faces, part_levels(model), model.uv, model.node_face,
@@ -146,9 +150,14 @@ def ladder(model: NominalModel, curved: bool = False) -> MultilevelSpace:
                 finer, C_r = insert_knots(patches[-1], new[0], new[1])
                 patches.append(finer)
                 refinements.append(C_r)
-    normals = node_normals(model.mesh) if curved else None
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
-    return nested_space(patches, refinements, model.mesh.nodes, normals, model.uv, family=family)
+    space = nested_space(patches, refinements, model.mesh.nodes, None, model.uv, family=family)
+    if curved is None:                     # as multilevel_for_mesh: scalar on a flat face or
+        curved = is_curved(model) and not scalar_holds_rigid_motions(model, space)  # a cylinder
+    if not curved:
+        return space
+    return nested_space(patches, refinements, model.mesh.nodes, node_normals(model.mesh),
+                        model.uv, family=family)
 
 
 def _trial(level: int, space: MultilevelSpace, chi_square: float, reference: tuple, variance: float,
@@ -192,7 +201,8 @@ def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray
 
 
 def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence,
-                        settings: MeasurementSettings, start_levels: int = 3, curved: bool = False,
+                        settings: MeasurementSettings, start_levels: int = 3,
+                        curved: bool | None = None,
                         progress: Callable | None = None
                         ) -> tuple[Measurement, GeometricRegularization, LevelSearch]:
     """Measure with the spline level chosen from the data (see the module docstring).

@@ -248,9 +248,11 @@ def in_region(points_world: np.ndarray, camera, inner: np.ndarray) -> np.ndarray
 
 
 # ----------------------------------------------------------------------------- ours
-def write_inputs(case: Case, arrays, roi, seed, folder: Path) -> None:
+def write_inputs(case: Case, arrays, roi, seed, folder: Path, edge_margin: float | None = None
+                 ) -> None:
     """The files both whole-process runs read: PNGs, cameras (ours: JSON; pyvale: CSV), ROI,
-    seed, and one ``georeg measure`` configuration per method."""
+    seed, and one ``georeg measure`` configuration per method (``edge_margin``: its
+    ``edge_margin_px``, None: the default)."""
     import cv2
     from pyvale import calib
     from fesdic_core.rig import write_cameras_json
@@ -266,7 +268,9 @@ def write_inputs(case: Case, arrays, roi, seed, folder: Path) -> None:
         ("" if g.hole_radius_mm is None else f"hole_radius_mm = {g.hole_radius_mm}\n")
     methods = {"georeg": "", "fe": 'name = "fe"\n',
                "tikhonov": f'name = "tikhonov"\ntikhonov_length_mm = [{TIKHONOV_MM}]\n'}
+    margin = "" if edge_margin is None else f"edge_margin_px = {edge_margin:g}\n"
     for name, method in methods.items():
+        method += margin
         (folder / f"{name}.toml").write_text(
             '[images]\ncam0 = "cam0.png"\ncam1 = "cam1.png"\n\n[cameras]\nfile = "cameras.json"\n\n'
             f"[geometry]\n{geometry}\n[method]\n{method}\n[output]\ndir = \"{name}_out\"\n")
@@ -426,7 +430,7 @@ def run_case(case: Case, arrays, noise: float, args, folder: Path) -> list[dict]
     """Both codes on one rendered pair: rows (method, errors, points, times)."""
     import cv2
     roi, inner, seed = roi_and_seed(case)
-    write_inputs(case, arrays, roi, seed, folder)
+    write_inputs(case, arrays, roi, seed, folder, args.edge_margin)
     calibration = pyvale_calib(case.cameras)
     R0 = cv2.Rodrigues(np.asarray(case.cameras[0].rvec, float).reshape(3, 1))[0]
     t0 = np.asarray(case.cameras[0].tvec, float).ravel()
@@ -517,7 +521,10 @@ def parse_args(argv=None) -> argparse.Namespace:
                         help="also the real Stereo DIC Challenge pair (data/dic_challenge_stereo)")
     parser.add_argument("--noise", nargs="+", type=float, default=[0.0, 2.0],
                         help="noise levels (gray levels, std)")
-    parser.add_argument("--steps", nargs="+", type=int, default=[4, 10], help="pyvale subset steps (px)")
+    parser.add_argument("--steps", nargs="*", type=int, default=[4, 10],
+                        help="pyvale subset steps (px); none: our methods only")
+    parser.add_argument("--edge-margin", type=float, default=None,
+                        help="[method] edge_margin_px of our methods (default: the config's)")
     parser.add_argument("--methods", nargs="+", default=["georeg"], choices=["georeg", "fe", "tikhonov"],
                         help="our methods (FE and Tikhonov: one in-process run each)")
     parser.add_argument("--threads", type=int, default=2, help="threads of each code")

@@ -114,3 +114,29 @@ def test_noise_alone_never_passes_the_criterion():
         kept += information_criterion(c0, m0, 1.0, 3000) <= information_criterion(c1, m1, 1.0, 3000)
     assert 0.7 < np.mean(gains) < 1.3
     assert kept == 40
+
+
+def test_ladder_takes_the_formulation_of_the_nominal():
+    """On a dyadic mesh the search's ladder is the fixed-level space, formulation included:
+    the scalar space on a cylinder (it holds the rigid normal motions), the vector one on a
+    doubly curved face (the scalar space misses them by 7e-4): equal operators level by
+    level, and the rigid normal modes inside every level of the doubly curved ladder."""
+    from fesdic_core.gauge import rigid_normal_modes
+    from fesdic_core.mesh import node_normals
+    from georeg_plugin.geometries import cylinder
+    from georeg_plugin.patch import SplinePatch
+    U, V = np.meshgrid(np.linspace(-20, 20, 3), np.linspace(-15, 15, 3), indexing="ij")
+    k = np.array([0, 0, 0, 1, 1, 1.0])                           # an elliptic paraboloid, twisted
+    dome = SplinePatch((2, 2), (k, k), np.stack([U, V, 0.004 * U ** 2 + 0.006 * V ** 2
+                                                 + 0.002 * U * V], -1))
+    for patch, vector in ((cylinder(100.0, 40.0, 30.0), False), (dome, True)):
+        model = nominal_model(patch, 2, "Q9")
+        space, fixed = ladder(model), multilevel_for_mesh(model, 3, curved=None)
+        assert bool(space.vector) == vector and space.n_levels == 3
+        for C, D in zip(space.operators, fixed.operators):
+            assert C.shape == D.shape and abs(C - D).max() < 1e-10
+    rigid, _ = rigid_normal_modes(model.mesh.nodes, node_normals(model.mesh))
+    for C in space.operators:
+        C = C.toarray()
+        coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
+        assert np.abs(rigid - C.T @ coeffs).max() < 1e-10 * np.abs(rigid).max()
