@@ -21,7 +21,7 @@ from fesdic_core.gauge import rigid_normal_modes
 from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
 from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
-from georeg_plugin.multipatch import part_mesh, part_space
+from georeg_plugin.multipatch import part_component_space, part_mesh, part_space
 from georeg_plugin.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
@@ -192,6 +192,17 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
     if model.uv is not None:
         check_nested_mesh(model, space.patch(0), f"the finest of {n_levels} spline levels")
     return space
+
+
+def component_space_for_mesh(model: NominalModel, n_levels: int) -> MultilevelSpace:
+    """The scalar spline levels of one component of a field on the core's mesh (a
+    displacement: ``kron(C_s, I3)`` of these): :func:`multilevel_for_mesh` with
+    ``curved=False`` for one patch; for a part, every face's levels glued where faces share
+    control points (:func:`~georeg_plugin.multipatch.part_component_space`)."""
+    if not model.is_part:
+        return multilevel_for_mesh(model, n_levels, curved=False)
+    _check_part_levels(model, n_levels)
+    return part_component_space(model.faces, n_levels, model.uv, model.node_face)
 
 
 #: the rigid normal modes must lie in the scalar space to this relative accuracy

@@ -25,7 +25,7 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from adapters.fesdic_core import NominalModel, multilevel_for_mesh
+from adapters.fesdic_core import NominalModel, component_space_for_mesh
 from fesdic_core.displacement import (DisplacementReference, DisplacementSettings,
                                       displacement_reference, measure_displacement)
 from fesdic_core.displacement_solvers import ComponentTikhonovSolver, componentwise
@@ -61,6 +61,7 @@ class SeriesReference:
     prefilter_px: float
     label: str
     interpolation_order: int = 3
+    element_face: np.ndarray | None = None       # a CAD part's face of each element
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -95,6 +96,7 @@ class TrackRun:
     reference_label: str
     scheduler: str
     time_s: float
+    element_face: np.ndarray | None = None       # a CAD part's face of each element
 
 
 # ----------------------------------------------------------------------------- reference
@@ -132,7 +134,7 @@ def load_reference(config: TrackConfig, progress: bool = False
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
     nominal = build_model(config.geometry, config.method.fixed_levels)
-    model = NominalModel(patch=nominal.patch, mesh=mesh, uv=nominal.uv)
+    model = dataclasses.replace(nominal, mesh=mesh)        # a part keeps its faces
     return mesh, tuple(m.cameras), images, model, f"measured here ({result.spec.label})"
 
 
@@ -149,7 +151,7 @@ def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | No
         raise ValueError(f"unknown displacement method {method!r}")
     if model is None:
         raise ValueError("[displacement] method = \"georeg\" needs the spline of the reference")
-    space = multilevel_for_mesh(model, levels)
+    space = component_space_for_mesh(model, levels)
     vector_space = dataclasses.replace(space, operators=tuple(componentwise(C)
                                                               for C in space.operators),
                                        refinement=(), gluing=())
@@ -183,7 +185,8 @@ def series_reference(config: TrackConfig, progress: bool = False) -> SeriesRefer
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
     return SeriesReference(displacement=reference, solver=solver,
                            prefilter_px=config.method.prefilter_px, label=label,
-                           interpolation_order=config.method.interpolation_order)
+                           interpolation_order=config.method.interpolation_order,
+                           element_face=None if model is None else model.element_face)
 
 
 # ----------------------------------------------------------------------------- frames
@@ -265,4 +268,4 @@ def run_track(config: TrackConfig, scheduler: str = "serial", progress: bool = F
                                       scheduler, on_frame, workers=workers)
     return TrackRun(config=config, mesh=reference.displacement.mesh, frames=tuple(results),
                     reference_label=reference.label, scheduler=scheduler,
-                    time_s=time.perf_counter() - t0)
+                    time_s=time.perf_counter() - t0, element_face=reference.element_face)

@@ -82,12 +82,15 @@ def pvd_text(run) -> str:
             f"{rows}  </Collection>\n</VTKFile>\n")
 
 
-def write_frame_vtu(path: str | os.PathLike, mesh, frame) -> None:
+def write_frame_vtu(path: str | os.PathLike, mesh, frame, element_face=None) -> None:
+    """One frame's VTU: displacement, residual and strain per node; for a CAD part of
+    several faces the cell data ``face`` (as ``georeg measure``'s VTU)."""
     write_mesh(path, mesh, point_data={
         "displacement_mm": np.asarray(frame.U, float),
         "residual": np.asarray(frame.residual_node, float),
         "strain_xx": frame.strain[:, 0], "strain_yy": frame.strain[:, 1],
-        "strain_xy": frame.strain[:, 2]})
+        "strain_xy": frame.strain[:, 2]},
+        cell_data=None if element_face is None else {"face": np.asarray(element_face, np.int32)})
 
 
 def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> list[Path]:
@@ -96,7 +99,7 @@ def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> lis
         for frame in run.frames:
             name = frame_file(frame)
             if name is not None:
-                write_frame_vtu(w.path(name), run.mesh, frame)
+                write_frame_vtu(w.path(name), run.mesh, frame, run.element_face)
         w.write_text(PVD_FILE, pvd_text(run))
         w.write_json(SUMMARY_FILE, track_summary(run))
         w.write_text(REPORT_FILE, track_report_html(run))

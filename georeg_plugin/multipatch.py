@@ -27,16 +27,17 @@ import logging
 from typing import Sequence
 
 import numpy as np
+import scipy.sparse as sps
 
 from .curved import RANK_RTOL, vector_gluing, vector_level
 from .fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
-from .operators import MultilevelSpace
+from .operators import MultilevelSpace, extraction_operator
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PartMesh", "part_mesh", "part_space", "NonConformingFacesError"]
+__all__ = ["PartMesh", "part_mesh", "part_space", "part_component_space", "NonConformingFacesError"]
 
 
 class NonConformingFacesError(ValueError):
@@ -183,3 +184,34 @@ def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarra
                     [v.operator.shape[0] for v in vector], shared.shape[1] - shared.shape[0])
     return MultilevelSpace(patches=tuple(tuple(f) for f in levels),
                            operators=tuple(v.operator for v in vector), vector=tuple(vector))
+
+
+def part_component_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarray,
+                         node_face: np.ndarray) -> MultilevelSpace:
+    """The scalar spline levels of a part, for one component of a field (a displacement).
+
+    Level ``s``: ``C_s^T[I, J] = R_J(xi_I)`` on the face of node ``I`` (Eq. 28, no normal:
+    each component of ``u`` is a spline of its own), every face refined dyadically, control
+    points shared by faces glued into one dof (``C_s = G_s C_s^faces``, so the field is
+    continuous across a shared edge). Control points that no node sees (under a hole cut out
+    of a face's mesh) are left out.
+    """
+    if int(n_levels) < 1:
+        raise ValueError(f"n_levels must be >= 1, got {n_levels}")
+    levels = [list(coarse_faces)]
+    for _ in range(int(n_levels) - 1):
+        levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
+    node_face, uv = np.asarray(node_face), np.asarray(uv)
+    n_fe = len(node_face)
+    operators = []
+    for faces in reversed(levels):                                 # s = 0: the finest
+        blocks = []
+        for k, face in enumerate(faces):
+            rows = np.flatnonzero(node_face == k)
+            local = extraction_operator(face, uv[rows]).tocoo()  # (n_cp, k)
+            blocks.append(sps.csr_matrix((local.data, (local.row, rows[local.col])),
+                                         shape=(local.shape[0], n_fe)))
+        C = (vector_gluing(faces) @ sps.vstack(blocks)).tocsr()  # glued dofs
+        seen = np.asarray(abs(C).sum(axis=1)).ravel() > 0
+        operators.append(C[seen])
+    return MultilevelSpace(patches=tuple(tuple(f) for f in levels), operators=tuple(operators))

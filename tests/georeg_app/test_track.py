@@ -136,6 +136,32 @@ def test_track_measures_the_reference_shape_first(series, tmp_path):
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
 
 
+def test_track_follows_a_cad_part_of_two_faces(series, tmp_path):
+    """The reference shape measured on a CAD part (the plate as two faces sharing an edge,
+    from IGES): the part keeps its faces through the series, the georeg displacement runs on
+    their glued component levels and the frame's VTU has the cell data `face`."""
+    from georeg_plugin.geometries import quadrilateral
+    from georeg_plugin.spline_io import write_iges
+    folder, mesh = series
+    left = quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2))
+    right = quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))
+    write_iges(folder / "halves.igs", [left, right], names=["left", "right"])
+    out = tmp_path / "out"
+    extra = ('[cameras]\nfile = "cameras.json"\n[geometry]\nkind = "cad"\nfile = "halves.igs"\n'
+             'elements = 32\n[method]\nname = "georeg"\nlevels = 2\ncalibrate = false\nscales = 2')
+    config = _config(folder, series_keys='cam0 = ["frames/f1_cam0.png"]\ncam1 = ["frames/f1_cam1.png"]',
+                     extra=extra, displacement='method = "georeg"\nlevels = 2')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    frame = json.loads((out / "summary.json").read_text())["frames"][0]
+    assert frame["status"] == "ok", frame["failure"]
+    vtu = meshio.read(out / frame["mesh_file"])
+    face = np.concatenate(vtu.cell_data["face"])
+    assert np.bincount(face).tolist() == [16, 16]
+    truth = MOTIONS[0](vtu.points)
+    rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - truth) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+
+
 def _fails_naming(capsys, config, out, *names):
     code = cli.main(["-q", "track", str(config), "--out", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
@@ -289,4 +315,5 @@ def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(
     result = track.measure_frame(reference, 1, ["c.png", "d.png"], None, 0)
     assert result.failure and "stop here" in result.failure
     assert seen == [("a.png", 0.7, 5), ("c.png", 0.7, 5)]
-    assert dataclasses.fields(track.SeriesReference)[-1].default == 3
+    defaults = {f.name: f.default for f in dataclasses.fields(track.SeriesReference)}
+    assert defaults["interpolation_order"] == 3

@@ -7,7 +7,8 @@ from numpy.testing import assert_allclose
 
 from georeg_plugin.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.geometries import cylinder, quadrilateral
-from georeg_plugin.multipatch import NonConformingFacesError, part_mesh, part_space
+from georeg_plugin.multipatch import (NonConformingFacesError, part_component_space, part_mesh,
+                                     part_space)
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements, refine_uniform
 
@@ -99,3 +100,35 @@ def test_part_levels_are_nested_glued_and_hold_the_rigid_modes(shape):
     ua = faces[0].basis(a) @ parts[0]
     ub = faces[1].basis(b) @ parts[1]
     assert_allclose(ua, ub, atol=1e-12)
+
+
+@pytest.mark.parametrize("shape", ["folded", "cylinder"])
+def test_part_component_levels_are_glued_nested_and_hold_the_part_s_affine_fields(shape):
+    """The scalar levels of a component (a displacement's): one dof where faces share a
+    control point (one row of points fewer), a field that is one affine function of X on
+    the whole part (a rigid translation, a homogeneous strain's component) is in every
+    level's range, and the levels are nested (Eq. 13)."""
+    if shape == "folded":
+        coarse = folded_faces()
+    else:                                 # a 120 degree cylinder cut at its C0 knot: 2 faces
+        p = cylinder(50.0, 40.0, 120.0)
+        cp, w, k = p.control_points, p.weights, np.array([0, 0, 0, 1, 1, 1.0])
+        coarse = [SplinePatch((2, 2), (k, p.knots[1]), cp[:3], w[:3]),
+                  SplinePatch((2, 2), (k, p.knots[1]), cp[2:], w[2:])]
+    n_levels = 3
+    fine = [refine_uniform(f, n_levels - 1)[0] for f in coarse]
+    mesh = part_mesh(fine)
+    space = part_component_space(coarse, n_levels, mesh.uv, mesh.node_face)
+    assert space.n_levels == n_levels
+    glued = sum(f.n_dofs for f in coarse) - space.operators[-1].shape[0]
+    assert glued == coarse[0].control_points.shape[1]          # one shared row of points
+    X = mesh.nodes
+    fields = np.column_stack([np.ones(len(X)), X])   # 1 and X: in every NURBS's span (Eq. 16)
+    for s in range(n_levels):
+        C = space.operators[s].toarray()
+        coeffs, *_ = np.linalg.lstsq(C.T, fields, rcond=None)
+        assert np.abs(fields - C.T @ coeffs).max() < 1e-10 * np.abs(fields).max()
+        if s + 1 < n_levels:
+            Cc = space.operators[s + 1].toarray()
+            inside, *_ = np.linalg.lstsq(C.T, Cc.T, rcond=None)
+            assert np.abs(Cc.T - C.T @ inside).max() < 1e-10
