@@ -33,6 +33,7 @@ from .fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
 from .operators import MultilevelSpace
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
+from .trimmed import trim_mesh
 
 logger = logging.getLogger(__name__)
 
@@ -81,7 +82,8 @@ def _on_boundary(patch: SplinePatch, uv: np.ndarray) -> np.ndarray:
 
 
 def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
-              family: str = "Q9", weld_rtol: float = 1e-7) -> PartMesh:
+              family: str = "Q9", weld_rtol: float = 1e-7,
+              loops: Sequence | None = None) -> PartMesh:
     """One FE mesh over the faces (each already refined to the FE resolution).
 
     Parameters
@@ -90,6 +92,9 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     names : one name per face (errors name them), optional.
     family : "Q9" or "Q4".
     weld_rtol : nodes closer than ``weld_rtol`` times the part's size are one node.
+    loops : per face, its trimming loops in ``(u, v)`` (outer, then holes) or None
+        (untrimmed); a trimmed face keeps the elements inside its loops
+        (:func:`~georeg_plugin.trimmed.trim_mesh`, a staircase boundary).
 
     Raises
     ------
@@ -105,6 +110,11 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     degree = ELEMENT_DEGREES[family]
     exact = all(max(f.degrees) <= degree for f in faces)
     meshes = [fe_mesh_from_spline(f, family, exact=max(f.degrees) <= degree) for f in faces]
+    if loops is not None:
+        if len(loops) != len(faces):
+            raise ValueError(f"part_mesh: {len(faces)} faces, {len(loops)} sets of loops")
+        meshes = [m if lp is None else trim_mesh(m, lp, _face_label(names, k))
+                  for k, (m, lp) in enumerate(zip(meshes, loops))]
     for k, f in enumerate(faces):
         if max(f.degrees) > degree:
             logger.warning("%s has degrees %s > %d: its %s nodes are placed on the surface, "
