@@ -73,7 +73,7 @@ class CadFace:
 
 
 def _read_shape(path: Path):
-    """The file's shape and its transfer reader (for the names)."""
+    """The file's shape and its reader (kept alive: its transfer results give the names)."""
     from OCP.IFSelect import IFSelect_RetDone
     suffix = path.suffix.lower()
     if suffix in STEP_SUFFIXES:
@@ -92,7 +92,7 @@ def _read_shape(path: Path):
         raise ValueError(f"{path}: unreadable {'STEP' if suffix in STEP_SUFFIXES else 'IGES'} "
                          f"file (OpenCASCADE status {status})")
     reader.TransferRoots()
-    return reader.OneShape(), reader.WS().TransferReader()
+    return reader.OneShape(), reader
 
 
 def _faces(shape) -> list:
@@ -110,10 +110,10 @@ def _faces(shape) -> list:
     return faces
 
 
-def _name(transfer, face) -> str | None:
+def _name(reader, face) -> str | None:
     """The STEP/IGES entity's name of ``face``, or None."""
     try:
-        entity = transfer.EntityFromShapeResult(face, 1)
+        entity = reader.WS().TransferReader().EntityFromShapeResult(face, 1)
     except Exception:                                   # noqa: BLE001 (no entity)
         return None
     if entity is None:
@@ -235,13 +235,13 @@ def read_kernel_faces(path) -> list[CadFace]:
     """
     from OCP.TopAbs import TopAbs_REVERSED
     path = Path(path)
-    shape, transfer = _read_shape(path)
+    shape, reader = _read_shape(path)
     faces = _faces(shape)
     if not faces:
         raise ValueError(f"{path}: no face (surface) in the file")
     out = []
     for k, face in enumerate(faces):
-        name = _name(transfer, face) or f"face{k}"
+        name = _name(reader, face) or f"face{k}"
         where = f"{path}: face {k} ({name!r})"
         nurbs, surface = _bspline(face, where)
         try:
