@@ -7,11 +7,15 @@ An independent writer (OpenCASCADE's STEPControl_Writer / IGESControl_Writer, no
   with a 3 mm fillet (7 faces: 6 planes, one cylindrical fillet);
 - ``cylinder``: a solid cylinder of radius 10 mm and height 20 mm along z (3 faces: the
   lateral cylinder, two discs trimmed by circles);
+- ``panel``: one cylindrical face (the nominal of issue 11's panel scene, ``tests/scenes.py``
+  ``CAD_PARTS``): radius 100 mm, axis along x at z = -100 mm, 50 mm long, 40 mm across,
+  crest at z = 0 (an untrimmed face bounded by its parameter range);
 - ``plate_hole``: one flat face at z = 0, 60 x 40 mm centred at the origin, with a round
   hole of radius 8 mm at the centre (a trimmed plane: outer loop and one hole).
 
 Run from the repository root: ``python tests/data/cad/make_reference_cad.py``.
 """
+import math
 from pathlib import Path
 
 from OCP.BRepBuilderAPI import (BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace,
@@ -20,7 +24,7 @@ from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
 from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeCylinder
 from OCP.BRepAdaptor import BRepAdaptor_Curve
 from OCP.GC import GC_MakeCircle
-from OCP.gp import gp_Ax2, gp_Dir, gp_Pln, gp_Pnt
+from OCP.gp import gp_Ax2, gp_Ax3, gp_Cylinder, gp_Dir, gp_Pln, gp_Pnt
 from OCP.IFSelect import IFSelect_RetDone
 from OCP.IGESControl import IGESControl_Controller, IGESControl_Writer
 from OCP.Interface import Interface_Static
@@ -51,6 +55,14 @@ def cylinder():
     return BRepPrimAPI_MakeCylinder(10.0, 20.0).Shape()
 
 
+def panel():
+    radius, length, width = 100.0, 50.0, 40.0
+    half = math.asin(0.5 * width / radius)
+    axis = gp_Ax3(gp_Pnt(0, 0, -radius), gp_Dir(1, 0, 0), gp_Dir(0, 0, 1))  # u = 0 at +z
+    return BRepBuilderAPI_MakeFace(gp_Cylinder(axis, radius), -half, half,
+                                   -0.5 * length, 0.5 * length).Face()
+
+
 def plate_hole():
     a, b, r = 0.5 * PLATE["length_mm"], 0.5 * PLATE["width_mm"], PLATE["hole_radius_mm"]
     outline = BRepBuilderAPI_MakePolygon(gp_Pnt(-a, -b, 0), gp_Pnt(a, -b, 0), gp_Pnt(a, b, 0),
@@ -77,6 +89,6 @@ def write(shape, name: str) -> None:
 
 
 if __name__ == "__main__":
-    for make in (box_fillet, cylinder, plate_hole):
+    for make in (box_fillet, cylinder, panel, plate_hole):
         write(make(), make.__name__)
         print("wrote", make.__name__)
