@@ -72,9 +72,17 @@ class CadFace:
     trimmed: bool
 
 
+def _quiet_kernel() -> None:
+    """OpenCASCADE's messages below failures off (its readers print to stdout; ours log)."""
+    from OCP.Message import Message, Message_Gravity
+    for printer in Message.DefaultMessenger_s().Printers():
+        printer.SetTraceLevel(Message_Gravity.Message_Fail)
+
+
 def _read_shape(path: Path):
     """The file's shape and its reader (kept alive: its transfer results give the names)."""
     from OCP.IFSelect import IFSelect_RetDone
+    _quiet_kernel()
     suffix = path.suffix.lower()
     if suffix in STEP_SUFFIXES:
         from OCP.STEPControl import STEPControl_Reader

@@ -161,3 +161,17 @@ def test_errors_name_the_file_and_the_missing_extra(tmp_path, monkeypatch):
                                          r"entity 144 trimmed surface.*install the optional "
                                          r"'cad' extra"):
         read_cad_faces(DATA / "plate_hole.igs")
+
+
+def test_a_file_without_faces_is_named(tmp_path):
+    """A STEP file holding only a wire (OpenCASCADE's writer): no face to measure."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.gp import gp_Pnt
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+    writer = STEPControl_Writer()
+    writer.Transfer(BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 0), gp_Pnt(10, 0, 0)).Edge(),
+                    STEPControl_AsIs)
+    path = tmp_path / "wire.step"
+    writer.Write(str(path))
+    with pytest.raises(ValueError, match=r"wire\.step: no face \(surface\) in the file"):
+        read_cad_faces(path)
