@@ -7,7 +7,9 @@ a patch"):
   bicubic CAD face, gets its nodes on the surface at the same parametric Q9 positions and
   Eq. 16 then holds only approximately: the operators only need ``R_J(xi_I)`` at the nodes);
 * the meshes are welded where faces share an edge: conforming when the edge nodes of both
-  faces coincide, else :class:`NonConformingFacesError` names the two faces;
+  faces coincide, else :class:`NonConformingFacesError` names the two faces; a trimmed face
+  (:mod:`georeg_plugin.trimmed`) keeps its elements inside its loops, a staircase: the faces
+  meeting it along its trimming curve are not welded there (a gap of up to one element);
 * each level moves the control points of every face by vectors (:mod:`georeg_plugin.curved`),
   one vector where control points of several faces coincide (a shared edge): the correction
   ``u`` is continuous across the edge;
@@ -128,7 +130,8 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     element_face = np.repeat(np.arange(len(faces)), [m.n_elements for m in meshes])
     size = float(np.ptp(nodes, axis=0).max()) or 1.0
     representative = coincident_groups(nodes, weld_rtol * size)   # lowest index: lowest face
-    _check_conforming(faces, meshes, offsets, representative, names, weld_rtol * size)
+    trimmed = [False] * len(faces) if loops is None else [lp is not None for lp in loops]
+    _check_conforming(faces, meshes, offsets, representative, names, weld_rtol * size, trimmed)
     kept, renumber = np.unique(representative, return_inverse=True)
     logger.info("part mesh: %d faces, %d elements, %d nodes (%d welded)", len(faces), len(conn),
                 kept.size, len(nodes) - kept.size)
@@ -137,12 +140,16 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
                     face_names=names, exact=exact)
 
 
-def _check_conforming(faces, meshes, offsets, representative, names, tol) -> None:
-    """Every boundary node of a face lying on another face must be one of its nodes."""
+def _check_conforming(faces, meshes, offsets, representative, names, tol, trimmed) -> None:
+    """Every boundary node of a face lying on another, untrimmed, face must be one of its
+    nodes (a trimmed face's mesh ends in a staircase inside its trimming curve: the faces
+    meeting it along that curve are not welded there)."""
     for a, (fa, ma) in enumerate(zip(faces, meshes)):
         edge = np.flatnonzero(_on_boundary(fa, ma.uv))
+        if not edge.size:                                   # trimmed all round
+            continue
         for b, fb in enumerate(faces):
-            if a == b:
+            if a == b or trimmed[b]:
                 continue
             lo, hi = ma.nodes[edge].min(0) - tol, ma.nodes[edge].max(0) + tol
             box = fb.control_points.reshape(-1, 3)          # convex hull: a quick rejection
