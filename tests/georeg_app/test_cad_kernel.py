@@ -201,3 +201,28 @@ def test_the_whole_cylinder_is_one_part_with_trimmed_discs_and_glued_levels():
     space = multilevel_for_mesh(model, 2, None)
     assert len(space.operators) == 2
     assert all(op.shape[1] == model.mesh.nodes.shape[0] for op in space.operators)
+
+
+@pytest.mark.parametrize("suffix", [".step", ".igs"])
+def test_a_located_face_is_placed(tmp_path, monkeypatch, suffix):
+    """The plate moved by a rotation about x and a translation (a TopLoc location written by
+    OpenCASCADE): its NURBS and its hole land where the motion puts them."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf, gp_Vec
+    monkeypatch.syspath_prepend(str(DATA))
+    import make_reference_cad
+    monkeypatch.setattr(make_reference_cad, "HERE", tmp_path)
+    rotation, translation = gp_Trsf(), gp_Trsf()
+    rotation.SetRotation(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(1, 0, 0)), np.radians(30.0))
+    translation.SetTranslation(gp_Vec(5.0, -2.0, 3.0))
+    moved = BRepBuilderAPI_Transform(make_reference_cad.plate_hole(),
+                                     translation.Multiplied(rotation), False).Shape()
+    make_reference_cad.write(moved, "plate")
+    (face,) = read_cad_faces(tmp_path / f"plate{suffix}")
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    hole = face.patch.evaluate(face.loops[1]) - [5.0, -2.0, 3.0]
+    local = hole @ np.array([[1, 0, 0], [0, c, s], [0, -s, c]]).T     # undo the rotation
+    np.testing.assert_allclose(np.hypot(local[:, 0], local[:, 1]), 8.0, atol=1e-6)
+    np.testing.assert_allclose(local[:, 2], 0.0, atol=1e-6)
+    np.testing.assert_allclose(face.patch.normals(_grid(face.patch, 3)),
+                               np.tile([0, -s, c], (9, 1)), atol=1e-9)
