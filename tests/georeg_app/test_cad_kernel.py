@@ -13,7 +13,8 @@ import pytest
 pytest.importorskip("OCP")
 
 from georeg_app import cad                                      # noqa: E402
-from georeg_app.cad import cad_faces, cad_model, cad_part, cad_triangles, read_cad_faces  # noqa: E402
+from georeg_app.cad import (cad_faces, cad_model, cad_part, cad_triangles,  # noqa: E402
+                            read_cad_faces)
 from georeg_plugin.geometries import cylinder                    # noqa: E402
 from georeg_plugin.iges import read_iges_surfaces                # noqa: E402
 from georeg_plugin.spline_io import write_iges                   # noqa: E402
