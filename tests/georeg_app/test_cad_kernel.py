@@ -227,3 +227,15 @@ def test_a_located_face_is_placed(tmp_path, monkeypatch, suffix):
     np.testing.assert_allclose(local[:, 2], 0.0, atol=1e-6)
     np.testing.assert_allclose(face.patch.normals(_grid(face.patch, 3)),
                                np.tile([0, -s, c], (9, 1)), atol=1e-9)
+
+
+def test_a_trimmed_face_still_needs_its_elements_to_refine_the_finest_level():
+    """The trimmed plate keeps fewer elements than 4^k per knot span; the check of Eq. 16's
+    nesting counts the spacing of its element centres: 16 per span passes 3 levels, not 4."""
+    from adapters.fesdic_core import multilevel_for_mesh
+    model = cad_model(DATA / "plate_hole.step", None, 16, 3)
+    assert model.mesh.n_elements < 16
+    assert len(multilevel_for_mesh(model, 3).operators) == 3
+    with pytest.raises(ValueError, match=r"face 0 has 16 FE elements per knot span, fewer "
+                                         r"than the 64"):
+        multilevel_for_mesh(model, 4)
