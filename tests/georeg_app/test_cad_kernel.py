@@ -239,3 +239,15 @@ def test_a_trimmed_face_still_needs_its_elements_to_refine_the_finest_level():
     with pytest.raises(ValueError, match=r"face 0 has 16 FE elements per knot span, fewer "
                                          r"than the 64"):
         multilevel_for_mesh(model, 4)
+
+
+def test_step_lengths_are_converted_to_mm(tmp_path):
+    """The plate's file with its length unit declared in metres instead of millimetres:
+    OpenCASCADE converts to mm, the hole's radius reads 8000 mm."""
+    text = (DATA / "plate_hole.step").read_text()
+    assert text.count("SI_UNIT(.MILLI.,.METRE.)") == 1
+    path = tmp_path / "plate_m.step"
+    path.write_text(text.replace("SI_UNIT(.MILLI.,.METRE.)", "SI_UNIT($,.METRE.)"))
+    (face,) = read_cad_faces(path)
+    hole = face.patch.evaluate(face.loops[1])
+    np.testing.assert_allclose(np.hypot(hole[:, 0], hole[:, 1]), 8000.0, rtol=1e-9)
