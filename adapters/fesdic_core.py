@@ -101,15 +101,17 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
 
 
 def part_model(faces, refinements: int, names=None, family: str = "Q9",
-               name: str = "part") -> NominalModel:
+               name: str = "part", loops=None) -> NominalModel:
     """FE mesh of a part of several faces (:func:`georeg_plugin.multipatch.part_mesh`):
-    every face refined ``refinements`` times dyadically, welded along shared edges.
+    every face refined ``refinements`` times dyadically, welded along shared edges; a face
+    with trimming ``loops`` (per face: outer then holes in its ``(u, v)``, or None) keeps
+    the elements inside them.
 
     Raises :class:`~georeg_plugin.multipatch.NonConformingFacesError` naming two faces whose
     shared edge's nodes do not coincide."""
     faces = tuple(faces)
     fine = [refine_uniform(f, int(refinements))[0] for f in faces]
-    part = part_mesh(fine, names, family)
+    part = part_mesh(fine, names, family, loops=loops)
     block = CellBlock(family=family_from_meshio(part.cell_type), connectivity=part.connectivity)
     return NominalModel(patch=faces[0], mesh=SurfaceMesh(nodes=part.nodes, blocks=(block,),
                                                          name=name),
@@ -117,11 +119,31 @@ def part_model(faces, refinements: int, names=None, family: str = "Q9",
                         element_face=part.element_face, face_names=part.face_names)
 
 
+def _elements_per_span(model: NominalModel, f: int, face: SplinePatch) -> float:
+    """FE elements per coarse knot span of face ``f``: their count over the spans, or, when a
+    trimmed face kept fewer (``georeg_plugin.trimmed``), the spans' width over the spacing of
+    the Q9 element centres (node 8, never welded: its ``uv`` is on its own face)."""
+    elements = model.element_face == f
+    count = np.count_nonzero(elements) / np.prod(face.n_elements)
+    connectivity = model.mesh.blocks[0].connectivity[elements]
+    if connectivity.shape[1] != 9:
+        return count
+    centres = model.uv[connectivity[:, 8]]
+    ratio = 1.0
+    for d, breaks in enumerate(face.breaks):
+        steps = np.diff(np.unique(centres[:, d]))
+        steps = steps[steps > 1e-9 * np.ptp(breaks)]
+        if not steps.size:
+            return count
+        ratio *= np.diff(breaks).min() / steps.min()
+    return max(count, round(ratio, 6))
+
+
 def _check_part_levels(model: NominalModel, n_levels: int) -> None:
     """Each face's FE elements must refine its finest spline level (Eq. 16): a mesh of
     :func:`part_model` has ``4^k`` elements per coarse knot span, ``k >= n_levels - 1``."""
     for f, face in enumerate(model.faces):
-        ratio = np.count_nonzero(model.element_face == f) / np.prod(face.n_elements)
+        ratio = _elements_per_span(model, f, face)
         if ratio < 4 ** (n_levels - 1):
             raise ValueError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
                              f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "

@@ -1,14 +1,27 @@
-"""``[geometry] kind = "cad"``: the nominal part read from its CAD (IGES), face by face.
+"""``[geometry] kind = "cad"``: the nominal part read from its CAD (IGES or STEP), face by face.
 
-The file's untrimmed B-spline surfaces (entity 128, placed by their entities 124; see
-:mod:`georeg_plugin.iges`) are the faces; ``faces`` picks some of them by index (directory
-order) or name. One face: the one-patch model of the plates (curved: the scalar spline
-space if it holds the rigid normal motions, a cylinder; else the vector formulation of
-:mod:`georeg_plugin.curved`; see ``adapters.fesdic_core.multilevel_for_mesh``). Several: one FE mesh over all of them, welded along shared
-edges, spline levels glued there (:mod:`georeg_plugin.multipatch`). STEP needs a CAD kernel
-(the future optional ``cad`` extra) and is refused with that message. A face of degree
-above 2 (bicubic CAD) goes through the part's mesh (nodes placed on the surface, Eq. 16
-approximate), even alone.
+Two readers, chosen by the file:
+
+- an IGES file whose faces are all untrimmed B-spline surfaces (entity 128, placed by their
+  entities 124; see :mod:`georeg_plugin.iges`) is read without extra dependency, always by
+  that reader (same results with or without the ``cad`` extra);
+- a STEP file (``.step``, ``.stp``), or an IGES file with trimmed (144/142) or analytic
+  surfaces, is read through OpenCASCADE (:mod:`georeg_app.cad_kernel`, the optional ``cad``
+  extra, ``cadquery-ocp``): every face as NURBS with its trimming loops. Without the extra
+  the error names it.
+
+``faces`` picks some faces by index (file order) or name. One untrimmed face: the one-patch
+model of the plates (curved: the scalar spline space if it holds the rigid normal motions, a
+cylinder; else the vector formulation of :mod:`georeg_plugin.curved`; see
+``adapters.fesdic_core.multilevel_for_mesh``). Several faces, or a trimmed one: one FE mesh
+over all of them, welded along shared edges, spline levels glued there
+(:mod:`georeg_plugin.multipatch`); a trimmed face keeps the elements inside its loops
+(:mod:`georeg_plugin.trimmed`: a staircase boundary; its spline levels stay on the untrimmed
+surface). A face of degree above 2 (bicubic CAD) goes through the part's mesh (nodes placed on
+the surface, Eq. 16 approximate), even alone.
+
+:func:`cad_triangles` triangulates every face of the file (trimmed faces inside their loops),
+for ray casting against the part.
 """
 from __future__ import annotations
 
@@ -22,60 +35,125 @@ import numpy as np
 
 from adapters.fesdic_core import NominalModel, nominal_model, part_model
 from georeg_plugin.iges import read_iges_surfaces
+from georeg_plugin.trimmed import grid_triangles
+
+from .cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CAD_SUFFIXES", "STEP_SUFFIXES", "check_cad_file", "cad_faces", "cad_model",
-           "cad_refinements"]
+__all__ = ["CAD_SUFFIXES", "STEP_SUFFIXES", "check_cad_file", "cad_faces", "cad_part",
+           "cad_model", "cad_refinements", "cad_triangles", "read_cad_faces"]
 
-CAD_SUFFIXES = (".igs", ".iges")
-STEP_SUFFIXES = (".step", ".stp")
+CAD_SUFFIXES = IGES_SUFFIXES + STEP_SUFFIXES
+#: what a user installs for STEP and trimmed IGES
+CAD_EXTRA = ("the optional 'cad' extra (OpenCASCADE: python -m pip install -e \".[cad]\", "
+             "i.e. cadquery-ocp)")
+_NEEDS_KERNEL = "needs a CAD kernel"
 
 
 def check_cad_file(path: Path) -> None:
-    """ValueError unless ``path`` is an IGES file (by its suffix); STEP is named."""
+    """ValueError unless ``path`` is an IGES or STEP file (by its suffix); STEP without the
+    ``cad`` extra is refused naming it."""
     suffix = Path(path).suffix.lower()
-    if suffix in STEP_SUFFIXES:
-        raise ValueError(f"{path}: STEP files need a CAD kernel (the future optional 'cad' "
-                         "extra); export the faces as IGES (.igs) meanwhile")
+    if suffix in STEP_SUFFIXES and not kernel_available():
+        raise ValueError(f"{path}: STEP files need a CAD kernel: install {CAD_EXTRA}, or "
+                         "export the faces as untrimmed B-spline surfaces in IGES (.igs)")
     if suffix not in CAD_SUFFIXES:
-        raise ValueError(f"{path}: kind = \"cad\" reads IGES files ({', '.join(CAD_SUFFIXES)}), "
-                         f"got suffix {suffix or '(none)'!r}")
+        raise ValueError(f"{path}: kind = \"cad\" reads IGES ({', '.join(IGES_SUFFIXES)}) or "
+                         f"STEP ({', '.join(STEP_SUFFIXES)}) files, got suffix "
+                         f"{suffix or '(none)'!r}")
 
 
-def _describe(surfaces) -> str:
-    return ", ".join(f"{k} {s.label!r} (directory entry {s.directory_entry})"
-                     for k, s in enumerate(surfaces))
+def _needs_kernel(path: Path) -> bool:
+    """True for a STEP file or an IGES file the base reader refuses as needing a kernel."""
+    if Path(path).suffix.lower() in STEP_SUFFIXES:
+        return True
+    try:
+        read_iges_surfaces(path)
+    except ValueError as err:
+        return _NEEDS_KERNEL in str(err)
+    return False
+
+
+def read_cad_faces(path: Path) -> list[CadFace]:
+    """Every face of a CAD file (see the module docstring for the reader used).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        Naming the file and the face (or IGES directory entry) at fault; a file that needs
+        the ``cad`` extra when it is not installed.
+    """
+    path = Path(path)
+    check_cad_file(path)
+    if path.suffix.lower() in IGES_SUFFIXES:
+        try:
+            surfaces = read_iges_surfaces(path)
+        except ValueError as err:
+            if _NEEDS_KERNEL not in str(err):
+                raise
+            if not kernel_available():
+                raise ValueError(f"{err}; install {CAD_EXTRA}") from None
+        else:
+            return [CadFace(s.label or f"face{k}", s.patch, (), False)
+                    for k, s in enumerate(surfaces)]
+    from .cad_kernel import read_kernel_faces
+    return read_kernel_faces(path)
+
+
+def _describe(faces: Sequence[CadFace]) -> str:
+    return ", ".join(f"{k} {f.name!r}" for k, f in enumerate(faces))
+
+
+def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
+    """The selected faces of a CAD file, with their trimming loops.
+
+    ``faces``: indices (file order, from 0) or names; None: all. Errors name the file and
+    the face (and the file's faces).
+    """
+    every = read_cad_faces(path)
+    if faces is None:
+        return tuple(every)
+    chosen = []
+    by_name = {f.name: k for k, f in enumerate(every)}
+    for f in faces:
+        if isinstance(f, str):
+            if f not in by_name:
+                raise ValueError(f"{path}: no face named {f!r}; its faces: {_describe(every)}")
+            chosen.append(by_name[f])
+        elif not 0 <= int(f) < len(every):
+            raise ValueError(f"{path}: face {f} is out of range (the file has "
+                             f"{len(every)}: {_describe(every)})")
+        else:
+            chosen.append(int(f))
+    if len(set(chosen)) != len(chosen):
+        raise ValueError(f"{path}: faces {list(faces)} name a face twice")
+    return tuple(every[k] for k in chosen)
 
 
 def cad_faces(path: Path, faces: Sequence | None = None) -> tuple[tuple, tuple]:
-    """The selected faces of an IGES file: their splines (mm, placed) and names.
+    """The selected faces of a CAD file: their untrimmed splines (mm, placed) and names."""
+    part = cad_part(path, faces)
+    return tuple(f.patch for f in part), tuple(f.name for f in part)
 
-    ``faces``: indices (directory order, from 0) or names; None: all. Errors name the file
-    and the face (and the directory entry of the file's faces).
+
+def cad_triangles(path: Path, deflection_mm: float = 0.01) -> np.ndarray:
+    """A triangulation of ALL faces of a CAD file, (m, 3, 3) mm, for ray casting.
+
+    Trimmed faces are respected. Through the kernel (STEP, trimmed IGES): OpenCASCADE's
+    ``BRepMesh_IncrementalMesh`` (chord deviation ``deflection_mm``); untrimmed IGES: a
+    parameter grid of each face (16 cells per knot span and direction). Triangles are
+    ordered along each face's normal ``S_u x S_v``.
     """
+    path = Path(path)
     check_cad_file(path)
-    surfaces = read_iges_surfaces(path)
-    if faces is None:
-        chosen = list(range(len(surfaces)))
-    else:
-        chosen = []
-        by_name = {s.label: k for k, s in enumerate(surfaces) if s.label}
-        for f in faces:
-            if isinstance(f, str):
-                if f not in by_name:
-                    raise ValueError(f"{path}: no face named {f!r}; its faces: "
-                                     f"{_describe(surfaces)}")
-                chosen.append(by_name[f])
-            elif not 0 <= int(f) < len(surfaces):
-                raise ValueError(f"{path}: face {f} is out of range (the file has "
-                                 f"{len(surfaces)}: {_describe(surfaces)})")
-            else:
-                chosen.append(int(f))
-        if len(set(chosen)) != len(chosen):
-            raise ValueError(f"{path}: faces {list(faces)} name a face twice")
-    names = tuple(surfaces[k].label or f"face{k}" for k in chosen)
-    return tuple(surfaces[k].patch for k in chosen), names
+    if _needs_kernel(path):
+        if not kernel_available():
+            raise ValueError(f"{path}: needs a CAD kernel: install {CAD_EXTRA}")
+        from .cad_kernel import kernel_triangles
+        return kernel_triangles(path, deflection_mm)
+    return np.concatenate([grid_triangles(f.patch, f.loops or None)
+                           for f in read_cad_faces(path)])
 
 
 def cad_refinements(faces: Sequence, elements: int | None, levels: int) -> int:
@@ -89,13 +167,16 @@ def cad_refinements(faces: Sequence, elements: int | None, levels: int) -> int:
 def cad_model(path: Path, faces: Sequence | None, elements: int | None,
               levels: int) -> NominalModel:
     """The nominal model of ``[geometry] kind = "cad"`` (see the module docstring)."""
-    patches, names = cad_faces(path, faces)
+    part = cad_part(path, faces)
+    patches, names = tuple(f.patch for f in part), tuple(f.name for f in part)
+    trimmed = any(f.trimmed for f in part)
     k = cad_refinements(patches, elements, levels)
     try:
-        if len(patches) == 1 and max(patches[0].degrees) <= 2:
+        if len(patches) == 1 and max(patches[0].degrees) <= 2 and not trimmed:
             model = nominal_model(patches[0], k, "Q9", name=names[0])
             return dataclasses.replace(model, face_names=names, element_face=np.zeros(
                 model.mesh.n_elements, dtype=int))              # the VTU's `face`, all 0
-        return part_model(patches, k, names, "Q9", name=Path(path).stem)
+        loops = [f.loops if f.trimmed else None for f in part] if trimmed else None
+        return part_model(patches, k, names, "Q9", name=Path(path).stem, loops=loops)
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from err

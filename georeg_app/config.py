@@ -32,7 +32,8 @@ A complete example (every key; optional keys show their default in parentheses):
     hole_radius_mm = 14.0         # plate_with_hole only (0 < r < width/2)
     # file = "specimen.msh"       # kind = "mesh": any surface mesh meshio reads;
                                   # kind = "cad": the part's IGES file (.igs, .iges:
-                                  # untrimmed B-spline faces, entity 128)
+                                  # untrimmed B-spline faces, entity 128) or, with the
+                                  # optional 'cad' extra, STEP (.step, .stp) or trimmed IGES
     # faces = [0, "lid"]          # kind = "cad" only: faces by index or name (default all)
     elements = 400                # approximate number of FE elements (default: chosen by the method)
                                   # (plates are centred at the world origin in the z = 0 plane)

@@ -7,7 +7,9 @@ a patch"):
   bicubic CAD face, gets its nodes on the surface at the same parametric Q9 positions and
   Eq. 16 then holds only approximately: the operators only need ``R_J(xi_I)`` at the nodes);
 * the meshes are welded where faces share an edge: conforming when the edge nodes of both
-  faces coincide, else :class:`NonConformingFacesError` names the two faces;
+  faces coincide, else :class:`NonConformingFacesError` names the two faces; a trimmed face
+  (:mod:`georeg_plugin.trimmed`) keeps its elements inside its loops, a staircase: the faces
+  meeting it along its trimming curve are not welded there (a gap of up to one element);
 * each level moves the control points of every face by vectors (:mod:`georeg_plugin.curved`),
   one vector where control points of several faces coincide (a shared edge): the correction
   ``u`` is continuous across the edge;
@@ -34,6 +36,7 @@ from .fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
 from .operators import MultilevelSpace, extraction_operator
 from .patch import SplinePatch, invert_points
 from .refine import refine_uniform
+from .trimmed import trim_mesh
 
 logger = logging.getLogger(__name__)
 
@@ -82,7 +85,8 @@ def _on_boundary(patch: SplinePatch, uv: np.ndarray) -> np.ndarray:
 
 
 def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
-              family: str = "Q9", weld_rtol: float = 1e-7) -> PartMesh:
+              family: str = "Q9", weld_rtol: float = 1e-7,
+              loops: Sequence | None = None) -> PartMesh:
     """One FE mesh over the faces (each already refined to the FE resolution).
 
     Parameters
@@ -91,6 +95,9 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     names : one name per face (errors name them), optional.
     family : "Q9" or "Q4".
     weld_rtol : nodes closer than ``weld_rtol`` times the part's size are one node.
+    loops : per face, its trimming loops in ``(u, v)`` (outer, then holes) or None
+        (untrimmed); a trimmed face keeps the elements inside its loops
+        (:func:`~georeg_plugin.trimmed.trim_mesh`, a staircase boundary).
 
     Raises
     ------
@@ -106,6 +113,11 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     degree = ELEMENT_DEGREES[family]
     exact = all(max(f.degrees) <= degree for f in faces)
     meshes = [fe_mesh_from_spline(f, family, exact=max(f.degrees) <= degree) for f in faces]
+    if loops is not None:
+        if len(loops) != len(faces):
+            raise ValueError(f"part_mesh: {len(faces)} faces, {len(loops)} sets of loops")
+        meshes = [m if lp is None else trim_mesh(m, lp, _face_label(names, k))
+                  for k, (m, lp) in enumerate(zip(meshes, loops))]
     for k, f in enumerate(faces):
         if max(f.degrees) > degree:
             logger.warning("%s has degrees %s > %d: its %s nodes are placed on the surface, "
@@ -119,7 +131,8 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
     element_face = np.repeat(np.arange(len(faces)), [m.n_elements for m in meshes])
     size = float(np.ptp(nodes, axis=0).max()) or 1.0
     representative = coincident_groups(nodes, weld_rtol * size)   # lowest index: lowest face
-    _check_conforming(faces, meshes, offsets, representative, names, weld_rtol * size)
+    trimmed = [False] * len(faces) if loops is None else [lp is not None for lp in loops]
+    _check_conforming(faces, meshes, offsets, representative, names, weld_rtol * size, trimmed)
     kept, renumber = np.unique(representative, return_inverse=True)
     logger.info("part mesh: %d faces, %d elements, %d nodes (%d welded)", len(faces), len(conn),
                 kept.size, len(nodes) - kept.size)
@@ -128,12 +141,16 @@ def part_mesh(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
                     face_names=names, exact=exact)
 
 
-def _check_conforming(faces, meshes, offsets, representative, names, tol) -> None:
-    """Every boundary node of a face lying on another face must be one of its nodes."""
+def _check_conforming(faces, meshes, offsets, representative, names, tol, trimmed) -> None:
+    """Every boundary node of a face lying on another, untrimmed, face must be one of its
+    nodes (a trimmed face's mesh ends in a staircase inside its trimming curve: the faces
+    meeting it along that curve are not welded there)."""
     for a, (fa, ma) in enumerate(zip(faces, meshes)):
         edge = np.flatnonzero(_on_boundary(fa, ma.uv))
+        if not edge.size:                                   # trimmed all round
+            continue
         for b, fb in enumerate(faces):
-            if a == b:
+            if a == b or trimmed[b]:
                 continue
             lo, hi = ma.nodes[edge].min(0) - tol, ma.nodes[edge].max(0) + tol
             box = fb.control_points.reshape(-1, 3)          # convex hull: a quick rejection
