@@ -119,7 +119,7 @@ def part_model(faces, refinements: int, names=None, family: str = "Q9",
                         element_face=part.element_face, face_names=part.face_names)
 
 
-def _elements_per_span(model: NominalModel, f: int, face: SplinePatch) -> float:
+def elements_per_span(model: NominalModel, f: int, face: SplinePatch) -> float:
     """FE elements per coarse knot span of face ``f``: their count over the spans, or, when a
     trimmed face kept fewer (``georeg_plugin.trimmed``), the spans' width over the spacing of
     the Q9 element centres (node 8, never welded: its ``uv`` is on its own face)."""
@@ -143,7 +143,7 @@ def _check_part_levels(model: NominalModel, n_levels: int) -> None:
     """Each face's FE elements must refine its finest spline level (Eq. 16): a mesh of
     :func:`part_model` has ``4^k`` elements per coarse knot span, ``k >= n_levels - 1``."""
     for f, face in enumerate(model.faces):
-        ratio = _elements_per_span(model, f, face)
+        ratio = elements_per_span(model, f, face)
         if ratio < 4 ** (n_levels - 1):
             raise ValueError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
                              f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "

@@ -46,7 +46,7 @@ from georeg_plugin.selection import (LevelTrial, information_criterion, noise_ga
                                      predicted_fit)
 from georeg_plugin.solver import GeometricRegularization
 
-from .fesdic_core import NominalModel, is_curved, scalar_holds_rigid_motions
+from .fesdic_core import NominalModel, elements_per_span, is_curved, scalar_holds_rigid_motions
 
 logger = logging.getLogger(__name__)
 
@@ -102,9 +102,9 @@ def _halved(breaks: np.ndarray, keep: np.ndarray) -> np.ndarray:
 def part_levels(model: NominalModel) -> int:
     """The most dyadic levels a part's FE mesh holds (Eq. 16): ``k`` with ``4^(k-1)`` FE
     elements per coarse knot span on the face that has fewest (:func:`part_model` meshes
-    have ``4^r`` after ``r`` refinements: ``r + 1`` levels)."""
-    ratios = [np.count_nonzero(model.element_face == f) / np.prod(face.n_elements)
-              for f, face in enumerate(model.faces)]
+    have ``4^r`` after ``r`` refinements: ``r + 1`` levels; a trimmed face counts by its
+    elements' spacing, :func:`~adapters.fesdic_core.elements_per_span`)."""
+    ratios = [elements_per_span(model, f, face) for f, face in enumerate(model.faces)]
     return 1 + max(0, int(np.floor(np.log(min(ratios)) / np.log(4.0) + 1e-9)))
 
 
