@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import logging
 import time
 from pathlib import Path
@@ -117,6 +118,12 @@ def load_reference(config: TrackConfig, progress: bool = False
         cameras = tuple(read_cameras_json(ref.cameras))
         model = None
         if ref.spline is not None:
+            if "faces" in json.loads(Path(ref.spline).read_text()):
+                raise ValueError(f"{ref.spline}: the reference is a part of several faces, which "
+                                 "a [reference] folder does not rebuild (its nodes' face "
+                                 "parameters are not saved); give the part's [geometry] "
+                                 '(kind = "cad") and its [cameras] instead, without [reference], '
+                                 "to measure the reference shape in the run")
             model = NominalModel(patch=read_spline_json(ref.spline), mesh=mesh, uv=None)
         return mesh, cameras, images, model, f"{ref.dir} ({ref.label})"
     from .methods import measure_specs

@@ -162,6 +162,28 @@ def test_track_follows_a_cad_part_of_two_faces(series, tmp_path):
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
 
 
+def test_a_part_s_measure_folder_as_reference_is_refused_naming_the_way(series, tmp_path, capsys):
+    """A `georeg measure` folder of a CAD part cannot be rebuilt as a part (no face
+    parameters saved): refused naming its spline file and the configuration that works."""
+    from georeg_plugin.geometries import quadrilateral
+    from georeg_plugin.spline_io import write_iges
+    folder, _ = series
+    halves = [quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2)),
+              quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))]
+    write_iges(folder / "halves.igs", halves, names=["left", "right"])
+    shape = tmp_path / "shape"
+    measure = folder / "measure_part.toml"
+    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
+                       'file = "cameras.json"\n[geometry]\nkind = "cad"\nfile = "halves.igs"\n'
+                       'elements = 32\n[method]\nname = "georeg"\nlevels = 2\ncalibrate = false\n'
+                       'scales = 2\n')
+    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    config = _config(folder, extra=f'[reference]\ndir = "{shape}"',
+                     displacement='method = "georeg"\nlevels = 1')
+    _fails_naming(capsys, config, tmp_path / "out", "_spline.json", "part of several faces",
+                  'kind = "cad"')
+
+
 def _fails_naming(capsys, config, out, *names):
     code = cli.main(["-q", "track", str(config), "--out", str(out)])
     err = capsys.readouterr().err.strip().splitlines()
