@@ -147,8 +147,8 @@ def point_normals(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray) -
         m = group.points_per_element
         dN = block.family.shape_derivatives(quad.xi[group.start:group.start + m])  # (m, nn, 2)
         Xe = nodes[group.connectivity]                                           # (E, nn, 3)
-        a = np.einsum("kn,enc->ekc", dN[..., 0], Xe)
-        b = np.einsum("kn,enc->ekc", dN[..., 1], Xe)
+        a = dN[..., 0] @ Xe                                    # X,xi (E, m, 3)
+        b = dN[..., 1] @ Xe                                    # X,eta
         out[group.span] = np.cross(a, b).reshape(-1, 3)
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
@@ -236,10 +236,10 @@ def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float) -> np.nd
     coef, box, zmin = coef[inside], box[inside], zmin[inside]
     if len(coef) == 0:
         return out
-    # the grid: cells about the median triangle's size, at most ~4 cells per point
+    # the grid: cells of half the median triangle's size, at most ~4 cells per point
     extent = np.median(np.max(box[:, 1] - box[:, 0], axis=1))
     span = np.maximum(hi - lo, 1e-12)
-    cell = max(float(extent), float(np.sqrt(span[0] * span[1] / (4.0 * len(P) + 16))), 1e-15)
+    cell = max(0.5 * float(extent), float(np.sqrt(span[0] * span[1] / (4.0 * len(P) + 16))), 1e-15)
     n = np.minimum(np.floor(span / cell).astype(np.int64) + 1, 1 << 12)
     size = span / n
     c0 = np.clip(np.floor((box[:, 0] - lo) / size), 0, n - 1).astype(np.int64)   # (m, 2)
