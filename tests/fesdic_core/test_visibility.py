@@ -17,7 +17,7 @@ from fesdic_core.visibility import (TOLERANCE_FRACTION, VisibilitySettings, embr
                                     visibility_mask)
 from shape_truth import bounded_shape_error, rms
 
-NO_ANGLE = VisibilitySettings(max_view_angle_deg=None)
+NO_ANGLE = VisibilitySettings(max_view_angle_deg=None, margin_px=0.0)     # the exact triangles
 
 
 def _face(origin, a, b, nx, ny):
@@ -77,6 +77,14 @@ def test_a_step_hides_the_band_behind_its_wall_as_computed_analytically():
     assert keep[upper].all()
     wall = (np.abs(d) < 1e-9) & (X[:, 2] < H - 2 * tol)          # back-facing: behind the top
     assert not keep[wall].any()
+    # a margin of 1 px moves the shadow's edge out by at most 1 px in the image
+    grown = visibility_mask(STEP, quad, STEP.nodes, [STEP_CAMERA],
+                            VisibilitySettings(max_view_angle_deg=None, margin_px=1.0))
+    assert not np.any(grown & ~keep)
+    moved = lower & keep & ~grown
+    edge = np.column_stack([np.full(moved.sum(), d_star), X[moved, 1], np.zeros(moved.sum())])
+    px = np.linalg.norm(STEP_CAMERA.project(X[moved]) - STEP_CAMERA.project(edge), axis=1)
+    assert moved.sum() > 0 and np.all(d[moved] > d_star) and px.max() <= 1.0 + 1e-6
 
 
 def test_the_numpy_and_embree_engines_agree():
@@ -211,3 +219,10 @@ def test_masking_an_occluder_measures_the_plate_better(bump_scene, plate_mesh):
     assert seeing.residual.mask.sum() < blind.residual.mask.sum()
     assert err["seeing"] < err["blind"]
     assert err["seeing"] < 1.25 * err["clean"]
+
+
+def test_the_margin_is_checked():
+    with pytest.raises(ValueError, match="margin_px"):
+        VisibilitySettings(margin_px=-1.0)
+    with pytest.raises(ValueError, match="margin_px"):
+        occluded(np.zeros((1, 3)), STEP_CAMERA, surface_triangles(STEP), 0.1, "embree", 1.0)
