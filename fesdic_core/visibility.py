@@ -45,7 +45,7 @@ from typing import Sequence
 import numpy as np
 
 from .mesh import SurfaceMesh
-from .quadrature import PixelQuadrature
+from .quadrature import PixelQuadrature, _reference_rule
 
 logger = logging.getLogger(__name__)
 
@@ -158,7 +158,15 @@ def point_normals(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray) -
     for group in quad.groups:
         block = mesh.blocks[int(np.searchsorted(offsets, group.elements[0], "right")) - 1]
         m = group.points_per_element
-        dN = block.family.shape_derivatives(quad.xi[group.start:group.start + m])  # (m, nn, 2)
+        xi = quad.xi[group.start:group.start + m]
+        if block.family.reference == "quad":                     # the sub-cell grid (n0, n1)
+            n0 = len(np.unique(xi[:, 0]))
+            n1 = m // n0
+        else:
+            n0 = n1 = int(round(np.sqrt(m)))
+        dN = _reference_rule(block.family, n0, n1)[3]            # (m, nn, 2), cached
+        if dN.shape[0] != m or not np.array_equal(_reference_rule(block.family, n0, n1)[0], xi):
+            dN = block.family.shape_derivatives(xi)
         Xe = nodes[group.connectivity]                                           # (E, nn, 3)
         a = dN[..., 0] @ Xe                                    # X,xi (E, m, 3)
         b = dN[..., 1] @ Xe                                    # X,eta
@@ -275,24 +283,36 @@ def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
     tri = np.repeat(np.arange(len(coef)), count)
     k = np.arange(len(tri)) - np.repeat(np.cumsum(count) - count, count)
     cells = (c0[tri, 1] + k // nx[tri]) * n[0] + c0[tri, 0] + k % nx[tri]
-    order = np.argsort(cells, kind="stable")
-    tri = tri[order]
+    # the nearest depth of each (triangle, cell) pair: the triangle's plane over the cell's
+    # rectangle (w = 1/z is affine: largest at a corner), and not nearer than its vertices
+    ix, iy = cells % n[0], cells // n[0]
+    ux = lo[0] + size[0] * np.stack([ix, ix + 1], 1)
+    vy = lo[1] + size[1] * np.stack([iy, iy + 1], 1)
+    c = coef[tri]
+    w_max = (c[:, 8] + np.max(c[:, 6:7] * ux, axis=1) + np.max(c[:, 7:8] * vy, axis=1))
+    with np.errstate(divide="ignore"):
+        near = np.maximum(zmin[tri], np.where(w_max > 0, 1.0 / w_max, 0.0))
+    # pairs sorted by cell, then by nearest depth: a point tests the first pairs of its cell,
+    # those nearer than its reach (key: cell + depth / z_scale, depth / z_scale in [0, 1))
+    z_scale = 2.0 * float(max(near.max(), reach.max()))
+    key = cells + near / z_scale
+    order = np.argsort(key)
+    tri, key = tri[order], key[order]
     per_cell = np.bincount(cells, minlength=int(n[0] * n[1]))
     first = np.cumsum(per_cell) - per_cell
-    nearest = np.full(len(per_cell), np.inf)                     # nearest triangle of each cell
-    np.minimum.at(nearest, cells, zmin[np.repeat(np.arange(len(coef)), count)])
     ip = np.clip(np.floor((u - lo) / size), 0, n - 1).astype(np.int64)
     pcell = ip[:, 1] * n[0] + ip[:, 0]
-    todo = np.flatnonzero(front & (nearest[pcell] < reach))
+    n_near = np.searchsorted(key, pcell + np.clip(reach, 0.0, None) / z_scale) - first[pcell]
+    todo = np.flatnonzero(front & (n_near > 0))
     if todo.size == 0:
         return out
 
     def block(rows: np.ndarray) -> None:
-        cnt = per_cell[pcell[rows]]
+        cnt = n_near[rows]
         pid = np.repeat(rows, cnt)
         k = np.arange(len(pid)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
         t = tri[first[pcell[pid]] + k]
-        c = coef[t]                                                              # (p, 9)
+        c = coef[t]                                                             # (p, 12)
         uu, vv = u[pid, 0], u[pid, 1]
         l1 = c[:, 0] * uu + c[:, 1] * vv + c[:, 2]
         l2 = c[:, 3] * uu + c[:, 4] * vv + c[:, 5]
