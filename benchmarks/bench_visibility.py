@@ -10,7 +10,10 @@ Times (median of ``--repeat`` runs): ``occluded`` for one camera (numpy; embree 
 and embreex are importable) and the whole ``visibility_mask`` (both cameras, grazing angle
 and self-occlusion), with the share of points kept.
 
-Run: ``python benchmarks/bench_visibility.py [--points 1000000] [--repeat 5]``
+``--demo``: instead, the mask's time on the demo's mesh (1024 Q9, 8 192 triangles) and cameras
+at the image scales 2, 1, 0 (what a demo measurement adds per scale; nothing is masked).
+
+Run: ``python benchmarks/bench_visibility.py [--points 1000000] [--repeat 5] [--demo]``
 """
 from __future__ import annotations
 
@@ -64,8 +67,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--demo", action="store_true")
     args = ap.parse_args()
     cams = demo_cameras()
+    if args.demo:
+        return demo(args.repeat)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
           f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f}")
     print(f"{'triangles':>9} {'points':>9} {'engine':>7} {'occluded 1 cam s':>17} "
@@ -84,6 +90,27 @@ def main() -> None:
                                                            X=X), args.repeat)
             print(f"{len(soup):>9} {len(X):>9} {engine:>7} {t1:>17.3f} {t2:>14.3f} "
                   f"{100 * keep.mean():>7.1f}")
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+def demo(repeat: int) -> None:
+    import tempfile
+    from fesdic_core.quadrature import pixel_quadrature
+    from georeg_app.pipeline import DEMO, build_model, demo_config
+    config, _, _ = demo_config(tempfile.mkdtemp())
+    mesh = build_model(config.geometry, config.method.fixed_levels).mesh
+    cams = demo_cameras(image_size=DEMO["image_size"], stereo_angle_deg=DEMO["stereo_angle_deg"],
+                        field_mm=DEMO["field_mm"])
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "
+          f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f}")
+    print(f"demo mesh: {mesh.n_elements} elements, {len(surface_triangles(mesh))} triangles")
+    print(f"{'scale':>5} {'points':>8} {'mask 2 cams s':>14} {'kept %':>7}")
+    for scale in (2, 1, 0):
+        scaled = [c.scaled(scale) for c in cams]
+        quad = pixel_quadrature(mesh, scaled)
+        X = quad.points(mesh.nodes)
+        t, keep = median_time(lambda: visibility_mask(mesh, quad, mesh.nodes, scaled, X=X), repeat)
+        print(f"{scale:>5} {quad.n_points:>8} {t:>14.3f} {100 * keep.mean():>7.1f}")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 
