@@ -61,8 +61,8 @@ A complete example (every key; optional keys show their default in parentheses):
                                   # fesdic_core.edges.DEFAULT_EDGE_MARGIN_PX)
     self_occlusion = true         # leave out the points the surface itself hides from a camera,
                                   # recomputed on the current shape at every scale (default true)
-    max_view_angle_deg = 75.0     # leave out the points seen at more than this angle from their
-                                  # normal, in (0, 90], 90 = no cut-off (default 75, the core's
+    max_view_angle_deg = 70.0     # leave out the points seen at more than this angle from their
+                                  # normal, in (0, 90], 90 = no cut-off (default 70, the core's
                                   # fesdic_core.visibility.DEFAULT_MAX_VIEW_ANGLE_DEG)
 
     [output]                      # optional section
