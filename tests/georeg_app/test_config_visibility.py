@@ -1,37 +1,11 @@
 """georeg_app.config: ``[method] self_occlusion`` and ``max_view_angle_deg`` (issue 11 item 4),
 their checks, and the core settings the pipeline makes of them."""
-import textwrap
-from pathlib import Path
-
 import pytest
 
 from fesdic_core.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG, VisibilitySettings
-from georeg_app.config import ConfigError, MethodConfig, load_config
+from georeg_app.config import ConfigError, MethodConfig
 from georeg_app.pipeline import visibility_settings
-
-BASE = """
-[images]
-cam0 = "left.tif"
-cam1 = "right.tif"
-
-[cameras]
-file = "cameras.json"
-
-[geometry]
-kind = "rectangle"
-length_mm = 60.0
-width_mm = 40.0
-
-[method]
-"""
-
-
-def _load(folder: Path, method: str):
-    for name in ("left.tif", "right.tif", "cameras.json"):
-        (folder / name).write_bytes(b"x")
-    path = folder / "config.toml"
-    path.write_text(textwrap.dedent(BASE) + method + "\n")
-    return load_config(path)
+from test_config_prefilter import _load      # a minimal config with the [method] lines given
 
 
 def test_defaults_are_the_cores(tmp_path):
