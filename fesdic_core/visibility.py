@@ -10,11 +10,11 @@ follow the shape as it is measured.
 Self-occlusion: the point ``X`` is hidden from the camera of centre ``C`` when the segment
 ``[X, C]`` crosses a triangle of the occluder soup: the current mesh's surface (each element
 split into flat triangles through its nodes, :func:`surface_triangles`) plus optional extra
-triangles (e.g. the CAD faces that are not measured). A hit closer to ``X`` than the
-tolerance (measured along the ray) is ignored, so that a point is not hidden by the
-triangles of its own element: the triangles through the nodes deviate from the curved
-element by its chord error, and a ray leaving a point at an angle ``theta`` from the normal
-meets them within ``chord / cos(theta)``. The default tolerance is a quarter of the median
+triangles (e.g. the CAD faces that are not measured). The triangles of the point's own
+element are left out, and a hit closer to ``X`` than the tolerance (measured along the ray)
+is ignored, so that a point is not hidden by its neighbourhood: the triangles through the
+nodes deviate from the curved elements by their chord error, and a ray leaving a point at an
+angle ``theta`` from the normal meets them within ``chord / cos(theta)``. The default tolerance is a quarter of the median
 edge of the mesh's triangles (:data:`TOLERANCE_FRACTION`), far above that chord error for
 any element that resolves its surface, and scaled with the mesh; its cost is a band of
 ``tolerance * sin(angle)`` at the foot of a wall (a concave corner) where points are called
@@ -150,6 +150,14 @@ def surface_triangles(mesh: SurfaceMesh, nodes: np.ndarray | None = None) -> np.
     return np.concatenate(tris)
 
 
+def _triangle_elements(mesh: SurfaceMesh) -> np.ndarray:
+    """(m,) the element (global index, blocks concatenated) of each of
+    :func:`surface_triangles`."""
+    offsets = np.cumsum([0] + [b.n_elements for b in mesh.blocks])
+    return np.concatenate([np.repeat(np.arange(b.n_elements) + o, len(_SPLITS[b.family.name]))
+                           for b, o in zip(mesh.blocks, offsets)])
+
+
 def point_normals(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray) -> np.ndarray:
     """(g, 3) unit normals ``X,xi x X,eta / |.|`` of the current surface (nodes (n, 3)) at the
     integration points."""
@@ -185,14 +193,17 @@ def grazing(X: np.ndarray, normals: np.ndarray, camera, max_view_angle_deg: floa
 
 
 def occluded(X: np.ndarray, camera, triangles: np.ndarray, tolerance_mm: float,
-             engine: str = "numpy", margin_px: float = 0.0) -> np.ndarray:
+             engine: str = "numpy", margin_px: float = 0.0,
+             owners: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(g,) bool: the segment from ``X`` (g, 3) to the centre of ``camera`` crosses one of
     ``triangles`` (m, 3, 3) farther than ``tolerance_mm`` from ``X`` (along the segment), or
     passes within ``margin_px`` pixels (in the camera's image) of such a triangle.
 
     Triangles with a vertex at or behind the camera's plane are left out. ``engine``:
     "numpy" (exact for the flat triangles, double precision), "embree" (margin 0 only), or
-    "auto" (embree when installed and the margin is 0).
+    "auto" (embree when installed, the margin is 0 and no ``owners``). ``owners``: the
+    element of each point (g,) and of each triangle (m,) (-1: none); a point is not hidden
+    by the triangles of its own element (numpy engine only).
     """
     X = np.asarray(X, float)
     T = np.asarray(triangles, float).reshape(-1, 3, 3)
@@ -200,12 +211,13 @@ def occluded(X: np.ndarray, camera, triangles: np.ndarray, tolerance_mm: float,
         return np.zeros(len(X), bool)
     if engine == "embree" and margin_px > 0:
         raise ValueError(f"engine 'embree' needs margin_px = 0, got {margin_px!r}")
-    if engine == "embree" or (engine == "auto" and margin_px == 0 and embree_available()):
+    if engine == "embree" or (engine == "auto" and margin_px == 0 and owners is None
+                              and embree_available()):
         return _occluded_embree(X, np.asarray(camera.center, float), T, tolerance_mm)
     P = camera.to_camera(X)
     Tc = camera.to_camera(T.reshape(-1, 3)).reshape(-1, 3, 3)
     K = np.asarray(camera.K, float)
-    return _occluded_numpy(P, Tc, tolerance_mm, margin_px / min(K[0, 0], K[1, 1]))
+    return _occluded_numpy(P, Tc, tolerance_mm, margin_px / min(K[0, 0], K[1, 1]), owners)
 
 
 def _occluded_embree(X, centre, T, tolerance_mm) -> np.ndarray:
@@ -254,7 +266,7 @@ def _triangle_planes(Tc: np.ndarray, z_eps: float, margin: float):
 
 
 def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
-                    margin: float = 0.0) -> np.ndarray:
+                    margin: float = 0.0, owners=None) -> np.ndarray:
     """Exact segment-triangle test in the camera frame (triangles grown by ``margin`` in u;
     a grown corner is cut at the grown bounding box), candidates from a grid on u."""
     depth = P[:, 2]
@@ -263,12 +275,17 @@ def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
     if not np.any(front):
         return out
     z_eps = 1e-9 * float(np.max(depth))
-    coef, box, zmin, _ = _triangle_planes(Tc, z_eps, margin)
+    coef, box, zmin, usable = _triangle_planes(Tc, z_eps, margin)
+    point_owner, tri_owner = (None, None) if owners is None else owners
+    if tri_owner is not None:
+        tri_owner = np.asarray(tri_owner)[usable]
     u = P[:, :2] / np.where(front, depth, 1.0)[:, None]
     reach = depth - tolerance_mm / np.sqrt(1.0 + np.einsum("ij,ij->i", u, u))  # depth of the hits
     lo, hi = u[front].min(0), u[front].max(0)                                   # that count
     inside = np.all((box[:, 1] >= lo) & (box[:, 0] <= hi), axis=1) & (zmin < reach[front].max())
     coef, box, zmin = coef[inside], box[inside], zmin[inside]
+    if tri_owner is not None:
+        tri_owner = tri_owner[inside]
     if len(coef) == 0:
         return out
     # the grid: cells of half the median triangle's size, at most ~4 cells per point
@@ -320,6 +337,8 @@ def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
         w = c[:, 6] * uu + c[:, 7] * vv + c[:, 8]
         hit = ((l1 >= -c[:, 9]) & (l2 >= -c[:, 10]) & (l1 + l2 <= 1.0 + c[:, 11])
                & (w * reach[pid] > 1.0))                          # 1/w < reach: nearer than X
+        if tri_owner is not None:                                 # not by its own element
+            hit &= tri_owner[t] != point_owner[pid]
         if margin > 0:                                            # the grown corners: cut
             b = box[t]
             hit &= ((uu >= b[:, 0, 0]) & (uu <= b[:, 1, 0]) & (vv >= b[:, 0, 1])
@@ -367,9 +386,12 @@ def visibility_mask(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray,
         tol = settings.tolerance_fraction * median_edge_mm(own)
         soup = own if settings.extra_occluders is None else np.concatenate(
             [own, settings.extra_occluders])
+        tri_owner = np.concatenate([_triangle_elements(mesh), np.full(len(soup) - len(own), -1)])
         for cam in cameras:
             hidden = np.zeros(len(X), bool)
-            hidden[keep] = occluded(X[keep], cam, soup, tol, settings.engine, settings.margin_px)
+            owners = None if settings.engine == "embree" else (quad.element[keep], tri_owner)
+            hidden[keep] = occluded(X[keep], cam, soup, tol, settings.engine, settings.margin_px,
+                                    owners)
             logger.debug("%d of %d points hidden from %s", hidden.sum(), len(X),
                          getattr(cam, "name", "a camera"))
             keep &= ~hidden
