@@ -214,10 +214,16 @@ def occluded(X: np.ndarray, camera, triangles: np.ndarray, tolerance_mm: float,
     if engine == "embree" or (engine == "auto" and margin_px == 0 and owners is None
                               and embree_available()):
         return _occluded_embree(X, np.asarray(camera.center, float), T, tolerance_mm)
-    P = camera.to_camera(X)
-    Tc = camera.to_camera(T.reshape(-1, 3)).reshape(-1, 3, 3)
+    P = _to_camera(camera, X)
+    Tc = _to_camera(camera, T.reshape(-1, 3)).reshape(-1, 3, 3)
     K = np.asarray(camera.K, float)
     return _occluded_numpy(P, Tc, tolerance_mm, margin_px / min(K[0, 0], K[1, 1]), owners)
+
+
+def _to_camera(camera, X: np.ndarray) -> np.ndarray:
+    """``camera.to_camera(X)`` (``R X + t``) by einsum: the (n, 3) @ (3, 3) matmul took 7 times
+    longer on the shared 2-core machine (0.45 s against 0.06 s for 0.8 M points)."""
+    return np.einsum("ij,kj->ik", X, camera.R) + np.asarray(camera.tvec, float)
 
 
 def _occluded_embree(X, centre, T, tolerance_mm) -> np.ndarray:
