@@ -39,6 +39,7 @@ from .shape import (GaussNewtonLog, ShapeResult, chi_square_change, current_node
                     shape_gauss_newton)
 from .solvers import DirectSolver, StepSolver
 from .uncertainty import LinearisedState, NoiseModel, linearised_state, noise_model, shape_std
+from .visibility import VisibilitySettings, visibility_mask
 
 logger = logging.getLogger(__name__)
 
@@ -78,6 +79,10 @@ class MeasurementSettings:
         keep every point: they only start the next scale, and their elements are a few
         pixels wide, so a margin there took most of a boundary element's points and threw
         the boundary nodes of plain FE off by tenths of a millimetre.
+    visibility : at every scale, leave out the points that either camera does not see on
+        the current surface (self-occlusion, extra occluders, grazing angle;
+        :func:`~fesdic_core.visibility.visibility_mask`); None: every point is kept. Combined
+        with the ``visibility`` callable of :func:`measure` when both are given.
     """
 
     scales: tuple[int, ...] = (0,)
@@ -95,6 +100,7 @@ class MeasurementSettings:
     max_shape_fraction: float = 0.25
     uncertainty: bool = True
     edge_margin_px: float = DEFAULT_EDGE_MARGIN_PX
+    visibility: VisibilitySettings | None = None
 
     def __post_init__(self):
         if not self.scales or any(int(s) != s or s < 0 for s in self.scales):
@@ -105,6 +111,9 @@ class MeasurementSettings:
             raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {self.normalisation!r}")
         if not self.edge_margin_px >= 0:
             raise ValueError(f"edge_margin_px must be >= 0, got {self.edge_margin_px!r}")
+        if self.visibility is not None and not isinstance(self.visibility, VisibilitySettings):
+            raise ValueError(f"visibility must be a VisibilitySettings or None, got "
+                             f"{self.visibility!r}")
 
 
 @dataclass(frozen=True)
@@ -330,6 +339,12 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             slides, centre = tangential_motions(mesh.nodes, normals, node_weights)
         X_now = quad.points(nodes_now)
         mask = None if visibility is None else visibility(X_now, scaled)
+        if settings.visibility is not None and settings.visibility.active:   # the current shape
+            seen = visibility_mask(mesh, quad, nodes_now, scaled, settings.visibility, X=X_now)
+            logger.info("scale %d: %d of %d integration points unseen by a camera (hidden or "
+                        "grazing) are left out", scale, seen.size - seen.sum(), seen.size)
+            if not seen.all():        # all seen: the mask stays as it was (bit-identical)
+                mask = seen if mask is None else mask & seen
         if settings.edge_margin_px > 0 and k == len(settings.scales):   # the finest scale:
             keep = edge_margin_mask(X_now, quad, mesh, nodes_now, scaled,  # the image model's
                                     settings.edge_margin_px / 2.0 ** scale)  # band at the edge

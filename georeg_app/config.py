@@ -60,6 +60,11 @@ A complete example (every key; optional keys show their default in parentheses):
     edge_margin_px = 2.0          # leave out the points within this many px of the mesh's
                                   # projected boundary, >= 0, 0 = none (default 2, the core's
                                   # fesdic_core.edges.DEFAULT_EDGE_MARGIN_PX)
+    self_occlusion = true         # leave out the points the surface itself hides from a camera,
+                                  # recomputed on the current shape at every scale (default true)
+    max_view_angle_deg = 70.0     # leave out the points seen at more than this angle from their
+                                  # normal, in (0, 90], 90 = no cut-off (default 70, the core's
+                                  # fesdic_core.visibility.DEFAULT_MAX_VIEW_ANGLE_DEG)
 
     [output]                      # optional section
     dir = "georeg_out"            # output folder (default "georeg_out"; `--out` overrides)
@@ -78,6 +83,7 @@ import numpy as np
 
 from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDERS
+from fesdic_core.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG
 
 from .toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
                           existing_file, integer, load_toml, number, resolve_path,
@@ -170,6 +176,8 @@ class MethodConfig:
     prefilter_px: float = DEFAULT_PREFILTER_PX
     edge_margin_px: float = DEFAULT_EDGE_MARGIN_PX
     interpolation_order: int = DEFAULT_ORDER
+    self_occlusion: bool = True
+    max_view_angle_deg: float = DEFAULT_MAX_VIEW_ANGLE_DEG
 
     @property
     def fixed_levels(self) -> int:
@@ -319,7 +327,10 @@ def _method(data: Any, source: Path) -> MethodConfig:
         prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
         edge_margin_px=t.take("edge_margin_px", number, "a number (px)", default=d.edge_margin_px),
         interpolation_order=t.take("interpolation_order", integer, "an integer (3 or 5)",
-                                   default=d.interpolation_order))
+                                   default=d.interpolation_order),
+        self_occlusion=t.take("self_occlusion", boolean, "true or false", default=d.self_occlusion),
+        max_view_angle_deg=t.take("max_view_angle_deg", number, "a number (deg)",
+                                  default=d.max_view_angle_deg))
     t.finish()
     check(t, "name", m.name, m.name in METHOD_NAMES, "one of " + ", ".join(map(json.dumps, METHOD_NAMES)))
     check(t, "levels", m.levels, m.levels == AUTO or m.levels >= 1, '>= 1 or "auto"')
@@ -334,6 +345,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
     check(t, "edge_margin_px", m.edge_margin_px, m.edge_margin_px >= 0, ">= 0 (px; 0 = no margin)")
     check(t, "interpolation_order", m.interpolation_order, m.interpolation_order in ORDERS,
           " or ".join(map(str, ORDERS)) + " (3 = cubic, 5 = quintic B-spline)")
+    check(t, "max_view_angle_deg", m.max_view_angle_deg, 0 < m.max_view_angle_deg <= 90,
+          "in (0, 90] (deg; 90 = no cut-off)")
     return m
 
 

@@ -37,6 +37,7 @@ from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm
 from fesdic_core.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
                              stereo_transform, write_cameras_json)
 from fesdic_core.tikhonov import TikhonovSolver
+from fesdic_core.visibility import VisibilitySettings
 from georeg_plugin.geometries import plate_with_hole, rectangle
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements
@@ -274,6 +275,15 @@ def input_files(config: Config) -> tuple:
                  if path is not None and Path(path).is_file())
 
 
+def visibility_settings(method: MethodConfig) -> VisibilitySettings | None:
+    """The core's visibility settings of ``[method] self_occlusion, max_view_angle_deg``
+    (None when both are off: every point kept)."""
+    angle = None if method.max_view_angle_deg >= 90.0 else method.max_view_angle_deg
+    if not method.self_occlusion and angle is None:
+        return None
+    return VisibilitySettings(self_occlusion=method.self_occlusion, max_view_angle_deg=angle)
+
+
 def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config: Config,
                  truth: Truth | None, progress) -> MethodResult:
     """Run one method; a failure (untrusted measurement, or an error) is returned, not raised."""
@@ -282,7 +292,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
                                    keep_stereo=method.keep_stereo,
                                    normalisation=method.normalisation,
                                    max_fixed_point=method.max_fixed_point,
-                                   edge_margin_px=method.edge_margin_px)
+                                   edge_margin_px=method.edge_margin_px,
+                                   visibility=visibility_settings(method))
     search = None
     try:
         if spec.name == "georeg" and spec.levels == AUTO:

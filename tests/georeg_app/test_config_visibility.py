@@ -1,0 +1,45 @@
+"""georeg_app.config: ``[method] self_occlusion`` and ``max_view_angle_deg`` (issue 11 item 4),
+their checks, and the core settings the pipeline makes of them."""
+import pytest
+
+from fesdic_core.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG, VisibilitySettings
+from georeg_app.config import ConfigError, MethodConfig
+from georeg_app.pipeline import visibility_settings
+from test_config_prefilter import _load      # a minimal config with the [method] lines given
+
+
+def test_defaults_are_the_cores(tmp_path):
+    m = _load(tmp_path, "").method
+    assert m.self_occlusion is True and m.max_view_angle_deg == DEFAULT_MAX_VIEW_ANGLE_DEG
+    v = visibility_settings(m)
+    assert isinstance(v, VisibilitySettings) and v.self_occlusion
+    assert v.max_view_angle_deg == DEFAULT_MAX_VIEW_ANGLE_DEG
+
+
+@pytest.mark.parametrize("text, occlusion, angle", [
+    ("self_occlusion = false", False, DEFAULT_MAX_VIEW_ANGLE_DEG),
+    ("max_view_angle_deg = 60", True, 60.0),
+    ("max_view_angle_deg = 90", True, None),                    # 90: no cut-off
+])
+def test_settings_are_read(tmp_path, text, occlusion, angle):
+    v = visibility_settings(_load(tmp_path, text).method)
+    assert v.self_occlusion is occlusion and v.max_view_angle_deg == angle
+
+
+def test_both_off_is_no_visibility():
+    assert visibility_settings(MethodConfig(self_occlusion=False, max_view_angle_deg=90.0)) is None
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("max_view_angle_deg = 0", "[method] max_view_angle_deg: must be in (0, 90] (deg; 90 = no "
+                               "cut-off), got 0"),
+    ("max_view_angle_deg = 95.5", "[method] max_view_angle_deg: must be in (0, 90]"),
+    ("max_view_angle_deg = nan", "[method] max_view_angle_deg: expected a number (deg), got nan"),
+    ('max_view_angle_deg = "75"', '[method] max_view_angle_deg: expected a number (deg), got "75"'),
+    ('self_occlusion = "yes"', '[method] self_occlusion: expected true or false, got "yes"'),
+    ("self_occlusion = 1", "[method] self_occlusion: expected true or false, got 1"),
+])
+def test_bad_values_name_the_key_and_value(tmp_path, text, expected):
+    with pytest.raises(ConfigError) as info:
+        _load(tmp_path, text)
+    assert expected in str(info.value), str(info.value)
