@@ -42,7 +42,8 @@ from .cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available
 logger = logging.getLogger(__name__)
 
 __all__ = ["CAD_SUFFIXES", "STEP_SUFFIXES", "check_cad_file", "cad_faces", "cad_part",
-           "cad_model", "cad_refinements", "cad_triangles", "read_cad_faces"]
+           "cad_model", "cad_refinements", "cad_face_indices", "cad_occluders", "cad_triangles",
+           "read_cad_faces"]
 
 CAD_SUFFIXES = IGES_SUFFIXES + STEP_SUFFIXES
 #: what a user installs for STEP and trimmed IGES
@@ -105,15 +106,13 @@ def _describe(faces: Sequence[CadFace]) -> str:
     return ", ".join(f"{k} {f.name!r}" for k, f in enumerate(faces))
 
 
-def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
-    """The selected faces of a CAD file, with their trimming loops.
-
-    ``faces``: indices (file order, from 0) or names; None: all. Errors name the file and
-    the face (and the file's faces).
-    """
-    every = read_cad_faces(path)
+def cad_face_indices(path: Path, faces: Sequence | None, every: Sequence[CadFace] | None = None
+                     ) -> list[int]:
+    """The file-order indices of the faces ``faces`` picks (indices or names; None: all).
+    Errors name the file and the face (and the file's faces)."""
+    every = read_cad_faces(path) if every is None else every
     if faces is None:
-        return tuple(every)
+        return list(range(len(every)))
     chosen = []
     by_name = {f.name: k for k, f in enumerate(every)}
     for f in faces:
@@ -128,7 +127,25 @@ def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
             chosen.append(int(f))
     if len(set(chosen)) != len(chosen):
         raise ValueError(f"{path}: faces {list(faces)} name a face twice")
-    return tuple(every[k] for k in chosen)
+    return chosen
+
+
+def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
+    """The selected faces of a CAD file, with their trimming loops (``faces``: see
+    :func:`cad_face_indices`)."""
+    every = read_cad_faces(path)
+    return tuple(every[k] for k in cad_face_indices(path, faces, every))
+
+
+def cad_occluders(path: Path, faces: Sequence | None) -> np.ndarray | None:
+    """The triangles of the faces of the file that are NOT measured (``faces`` picks the
+    measured ones), (m, 3, 3) mm: they hide parts of the measured faces from a camera
+    (a block's walls next to a plate); None when every face is measured."""
+    every = read_cad_faces(path)
+    others = sorted(set(range(len(every))) - set(cad_face_indices(path, faces, every)))
+    if not others:
+        return None
+    return cad_triangles(path, only=others)
 
 
 def cad_faces(path: Path, faces: Sequence | None = None) -> tuple[tuple, tuple]:
@@ -137,8 +154,10 @@ def cad_faces(path: Path, faces: Sequence | None = None) -> tuple[tuple, tuple]:
     return tuple(f.patch for f in part), tuple(f.name for f in part)
 
 
-def cad_triangles(path: Path, deflection_mm: float = 0.01) -> np.ndarray:
-    """A triangulation of ALL faces of a CAD file, (m, 3, 3) mm, for ray casting.
+def cad_triangles(path: Path, deflection_mm: float = 0.01,
+                  only: Sequence[int] | None = None) -> np.ndarray:
+    """A triangulation of the faces of a CAD file (all, or the file-order indices ``only``),
+    (m, 3, 3) mm, for ray casting.
 
     Trimmed faces are respected. Through the kernel (STEP, trimmed IGES): OpenCASCADE's
     ``BRepMesh_IncrementalMesh`` (chord deviation ``deflection_mm``); untrimmed IGES: a
@@ -151,9 +170,10 @@ def cad_triangles(path: Path, deflection_mm: float = 0.01) -> np.ndarray:
         if not kernel_available():
             raise ValueError(f"{path}: needs a CAD kernel: install {CAD_EXTRA}")
         from .cad_kernel import kernel_triangles
-        return kernel_triangles(path, deflection_mm)
-    return np.concatenate([grid_triangles(f.patch, f.loops or None)
-                           for f in read_cad_faces(path)])
+        return kernel_triangles(path, deflection_mm, only=only)
+    every = read_cad_faces(path)
+    return np.concatenate([grid_triangles(every[k].patch, every[k].loops or None)
+                           for k in (range(len(every)) if only is None else only)])
 
 
 def cad_refinements(faces: Sequence, elements: int | None, levels: int) -> int:

@@ -267,8 +267,9 @@ def read_kernel_faces(path) -> list[CadFace]:
 
 
 def kernel_triangles(path, deflection_mm: float = 0.01,
-                     angle_rad: float = 0.1) -> np.ndarray:
-    """A triangulation of every face of the file inside its loops, (m, 3, 3) mm.
+                     angle_rad: float = 0.1, only=None) -> np.ndarray:
+    """A triangulation of every face of the file (or of the file-order indices ``only``)
+    inside its loops, (m, 3, 3) mm.
 
     ``BRepMesh_IncrementalMesh`` with chord deviation ``deflection_mm`` (and angular
     deflection ``angle_rad``); triangles ordered so that their normal is the face's outward
@@ -282,7 +283,10 @@ def kernel_triangles(path, deflection_mm: float = 0.01,
     shape, _ = _read_shape(path)
     BRepMesh_IncrementalMesh(shape, float(deflection_mm), False, float(angle_rad), True)
     out = []
+    wanted = None if only is None else set(int(k) for k in only)
     for k, face in enumerate(_faces(shape)):
+        if wanted is not None and k not in wanted:
+            continue
         location = TopLoc_Location()
         mesh = BRep_Tool.Triangulation_s(face, location)
         if mesh is None:

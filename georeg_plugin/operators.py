@@ -147,7 +147,7 @@ class MultilevelSpace:
         points of level ``s`` are ``G_s^T q_s``.
     vector : tuple of :class:`~georeg_plugin.curved.VectorLevel`, one per level (same
         numbering as ``operators``), or empty: a curved part's levels move their control
-        points by vectors (``operators[s]`` is then an orthonormal basis of the range).
+        points by vectors (``operators[s]`` is then a basis of the range, :func:`~georeg_plugin.curved.range_basis`).
     """
 
     patches: tuple
