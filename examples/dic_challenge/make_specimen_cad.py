@@ -278,6 +278,28 @@ def face_area(face) -> float:
     return float(props.Mass())
 
 
+def face_points(face, deflection_mm: float = 0.05) -> np.ndarray:
+    """Points (n, 3) sampled inside a face's trimmed domain: the nodes of OpenCASCADE's
+    triangulation of the face (``deflection_mm`` from the surface at most)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.TopLoc import TopLoc_Location
+    BRepMesh_IncrementalMesh(face, deflection_mm, False, 0.2, False)
+    location = TopLoc_Location()
+    triangulation = BRep_Tool.Triangulation_s(face, location)
+    transform = location.Transformation()
+    points = [triangulation.Node(i).Transformed(transform) for i in range(1, triangulation.NbNodes() + 1)]
+    return np.array([[p.X(), p.Y(), p.Z()] for p in points])
+
+
+def distance_to_line(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Distance (n,) of points (n, 3) to the infinite line through the segment ``line`` (2, 3)."""
+    a = np.asarray(line, float)
+    d = (a[1] - a[0]) / np.linalg.norm(a[1] - a[0])
+    arm = points - a[0]
+    return np.linalg.norm(arm - np.outer(arm @ d, d), axis=1)
+
+
 def expected_areas(features, height: float) -> dict:
     """The faces' areas (mm^2) from the features' dimensions, by hand (no CAD kernel)."""
     by = {f.name: f for f in features}
@@ -338,6 +360,11 @@ def main(argv=None) -> int:
         area = face_area(back[name]) if name in back else float("nan")
         logger.info("  %-14s area %9.3f mm^2 (by hand %9.3f, %+.1e relative)", name, area,
                     expected[name], area / expected[name] - 1)
+    for f in features:
+        if f.kind == "half_cylinder":
+            r = distance_to_line(face_points(back[f.name]), f.line_mm)
+            logger.info("  %-14s radius at %d sampled points: %.6f..%.6f mm (nominal %g)", f.name,
+                        len(r), r.min(), r.max(), f.radius_mm)
     if list(back) != list(FACE_NAMES):
         logger.error("read back: faces %s, expected %s", list(back), list(FACE_NAMES))
         return 1
