@@ -333,6 +333,79 @@ def expected_areas(features, height: float) -> dict:
     return {n: float(out[n]) for n in FACE_NAMES}
 
 
+# --------------------------------------------------------------------------- interim IGES
+# Until the `cad` extra reads STEP and trimmed faces, `georeg measure` reads untrimmed
+# B-spline surfaces (IGES entity 128) only. This writes, through OpenCASCADE's IGES
+# translator, the faces the face-by-face run measures as such surfaces: the block top
+# (inset, block_top.toml), the bars' arcs about their crests (cylinder_*.toml), and in place
+# of the trimmed plate three rectangles of it free of features (INTERIM_BASE_MM): one that
+# holds the README's flatness region and the east side of the block's ring, and one strip
+# beside each bar that holds its ring (the plate 1.5..6 mm from its footprint).
+
+#: x and y ranges (mm) of the plate's stand-ins: ``base`` from 1.5 mm east of the block and
+#: 1.1 mm south of the vertical prism's end to the face-by-face nominal's edges (base.toml);
+#: ``base_h`` between the horizontal prism and bar, ``base_v`` between the vertical prism
+#: and bar (each at least 1.5 mm from a footprint)
+INTERIM_BASE_MM = {"base": ((-10.0, 49.0), (-49.0, 1.0)), "base_h": ((-47.0, -4.0), (23.0, 31.5)),
+                   "base_v": ((23.5, 32.9), (3.0, 46.0))}
+
+
+def _biquadratic(face):
+    """The face's surface as a B-spline of degree 2 in u and v (NURBS conversion, elevation)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.TopoDS import TopoDS
+    surface = BRep_Tool.Surface_s(TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape()))
+    surface.IncreaseDegree(max(2, surface.UDegree()), max(2, surface.VDegree()))
+    return surface
+
+
+def interim_surfaces(folder: Path = HERE) -> dict:
+    """Name -> untrimmed biquadratic B-spline surface of the faces of the face-by-face run."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.gp import gp_Ax3, gp_Cylinder, gp_Dir, gp_Pln
+    up, x = gp_Dir(0.0, 0.0, 1.0), gp_Dir(1.0, 0.0, 0.0)
+    out = {name: _biquadratic(BRepBuilderAPI_MakeFace(gp_Pln(gp_Ax3(_pnt([0, 0, 0]), up, x)),
+                                                       x0, x1, y0, y1).Face())
+           for name, ((x0, x1), (y0, y1)) in INTERIM_BASE_MM.items()}
+    top = np.asarray(load_face(folder / "block_top.toml").nominals[0].corners_mm, float)
+    lo, hi = top.min(axis=0), top.max(axis=0)
+    out["block_top"] = _biquadratic(BRepBuilderAPI_MakeFace(
+        gp_Pln(gp_Ax3(_pnt([0, 0, top[0, 2]]), up, x)), lo[0], hi[0], lo[1], hi[1]).Face())
+    for name in ("cylinder_h", "cylinder_v"):
+        n = next(n for n in load_face(folder / f"{name}.toml").nominals if n.kind == "cylinder")
+        line = np.asarray(n.line_mm, float)
+        axis = line[1] - line[0]
+        frame = gp_Ax3(_pnt(line[0]), gp_Dir(*axis), up)          # u = 0 at the crest
+        half = np.radians(n.arc_deg / 2)
+        out[name] = _biquadratic(BRepBuilderAPI_MakeFace(gp_Cylinder(frame, float(n.radius_mm)), -half, half,
+                                                         0.0, float(np.linalg.norm(axis))).Face())
+    return out
+
+
+def write_interim_iges(path: Path, surfaces: dict) -> None:
+    """One IGES entity 128 per surface, named by an entity 406 form 15, in mm."""
+    from OCP.GeomToIGES import GeomToIGES_GeomSurface
+    from OCP.IGESBasic import IGESBasic_Name
+    from OCP.IGESControl import IGESControl_Controller, IGESControl_Writer
+    from OCP.TCollection import TCollection_HAsciiString
+    IGESControl_Controller.Init_s()
+    writer = IGESControl_Writer("MM", 0)
+    convert = GeomToIGES_GeomSurface()
+    convert.SetModel(writer.Model())
+    for name, surface in surfaces.items():
+        entity = convert.TransferSurface(surface, *surface.Bounds())
+        label = IGESBasic_Name()
+        label.Init(1, TCollection_HAsciiString(name))
+        entity.AddProperty(label)
+        if not writer.AddEntity(entity):
+            raise RuntimeError(f"OpenCASCADE: cannot add the IGES entity of {name!r}")
+    writer.ComputeModel()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not writer.Write(str(path)):
+        raise RuntimeError(f"{path}: OpenCASCADE could not write the IGES file")
+
+
 def build(out: Path = DEFAULT_OUT) -> dict:
     """Build the union, name its visible faces, write ``out``; the named faces."""
     shape, features, height = specimen_solid(HERE / "specimen.toml", HERE / "block_top.toml")
@@ -344,6 +417,9 @@ def build(out: Path = DEFAULT_OUT) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="STEP file to write")
+    p.add_argument("--interim-iges", type=Path, default=None,
+                   help="also write the face-by-face run's faces as untrimmed IGES B-splines "
+                        "(entity 128) to this file, for georeg measure before the cad extra")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
     try:
@@ -352,6 +428,10 @@ def main(argv=None) -> int:
         print("make_specimen_cad.py: error: needs OpenCASCADE (pip install cadquery-ocp)", file=sys.stderr)
         return 1
     faces = build(args.out)
+    if args.interim_iges is not None:
+        surfaces = interim_surfaces()
+        write_interim_iges(args.interim_iges, surfaces)
+        logger.info("wrote %s: %s", args.interim_iges, ", ".join(surfaces))
     logger.info("wrote %s: %d faces, %.1f kB", args.out, len(faces), args.out.stat().st_size / 1e3)
     back = read_step_faces(args.out)
     _, features, height = specimen_solid(HERE / "specimen.toml", HERE / "block_top.toml")
