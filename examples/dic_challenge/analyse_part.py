@@ -1,7 +1,7 @@
 """The challenge's figures from a measured VTU: the specimen measured as one part, or face by face.
 
     python examples/dic_challenge/analyse_part.py OUT_DIR [--config specimen_part.toml]
-        [--reference REF_DIR/summary.json] [--json FILE]
+        [--reference REF_DIR/summary.json] [--interim-base] [--json FILE]
 
 ``OUT_DIR`` is either the output folder of ``georeg measure specimen_part.toml`` (its
 ``summary.json`` names the georeg VTU, whose cell data ``face`` indexes the faces in the
@@ -123,11 +123,24 @@ def face_region(name: str, points: np.ndarray, faces: dict) -> np.ndarray:
     return np.ones(len(points), bool)
 
 
-def challenge_run(points: dict, time_s: float | None) -> ChallengeRun:
-    """The points as the example's :class:`ChallengeRun` (every point seen), base plane z = 0."""
+def in_rectangles(points: np.ndarray, rectangles) -> np.ndarray:
+    """(n,) bool: the (x, y) of ``points`` inside any of ``rectangles`` ((x0, x1), (y0, y1))."""
+    keep = np.zeros(len(points), bool)
+    for (x0, x1), (y0, y1) in rectangles:
+        keep |= (points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)
+    return keep
+
+
+def challenge_run(points: dict, time_s: float | None, base_rectangles=None) -> ChallengeRun:
+    """The points as the example's :class:`ChallengeRun` (every point seen), base plane z = 0.
+
+    ``base_rectangles``: keep only the plate's points in these ((x0, x1), (y0, y1)) (mm).
+    """
     faces = {name: load_face(HERE / f"{name}.toml") for name in FACES}
     kept = {name: P[face_region(name.removesuffix("_flat"), P, faces)] if name.removesuffix("_flat") in faces else P
             for name, P in points.items()}
+    if base_rectangles is not None and "base" in kept:
+        kept["base"] = kept["base"][in_rectangles(kept["base"], base_rectangles)]
     if "base" not in kept:
         raise ValueError("no base plate among the measured faces (it defines the base plane)")
     R, t = base_plane_frame(kept["base"])
@@ -203,6 +216,10 @@ def main(argv=None) -> int:
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG,
                    help="the georeg measure config (its [geometry] faces name the VTU's faces)")
     p.add_argument("--reference", type=Path, default=None, help="summary.json of a run.py run")
+    p.add_argument("--interim-base", action="store_true",
+                   help="keep only the plate within the interim IGES's rectangles "
+                        "(make_specimen_cad.INTERIM_BASE_MM), to compare a face-by-face run with "
+                        "a part measured from the interim IGES on the same plate region")
     p.add_argument("--json", type=Path, default=None, help="write the figures to this JSON file")
     args = p.parse_args(argv)
     try:
@@ -211,7 +228,11 @@ def main(argv=None) -> int:
         else:
             faces = tomllib.loads(args.config.read_text())["geometry"]["faces"]
             points, time_s = read_part(args.out_dir, [str(f) for f in faces])
-        this = figures(challenge_run(points, time_s))
+        rectangles = None
+        if args.interim_base:
+            from make_specimen_cad import INTERIM_BASE_MM
+            rectangles = list(INTERIM_BASE_MM.values())
+        this = figures(challenge_run(points, time_s, rectangles))
         reference = None if args.reference is None else json.loads(args.reference.read_text())
     except (OSError, ValueError, KeyError) as err:
         print(f"analyse_part.py: error: {' '.join(str(err).split())}", file=sys.stderr)
