@@ -158,9 +158,30 @@ def challenge_run(points: dict, time_s: float | None, base_rectangles=None) -> C
     return ChallengeRun(measured, results, math.nan if time_s is None else float(time_s), None, None)
 
 
+def prism_figures(run: ChallengeRun) -> dict:
+    """Per prism measured on both slanted faces: each face's RMS to its best-fit plane (um)
+    and the included angle between the two planes (deg), beside the nominal angle."""
+    out = {}
+    specimen = run.faces["base"].specimen
+    for f in (f for f in specimen.features if f.kind == "wedge"):
+        sides = sorted(k for k in run.results if k.startswith(f.name + "_"))
+        if len(sides) != 2:
+            continue
+        P = [run.results[k].points_mm for k in sides]
+        n = [analysis.plane_frame(p)[1][2] for p in P]
+        out[f.name] = {"rms_plane_um": {k: 1e3 * analysis.rms(analysis.plane_residuals(p)) for k, p in zip(sides, P)},
+                       "included_angle_deg": 180.0 - float(np.degrees(np.arccos(np.clip(n[0] @ n[1], -1, 1)))),
+                       "nominal_angle_deg": float(2 * np.degrees(np.arctan2(f.half_width_mm, f.line_mm[0][2])))}
+    return out
+
+
 def figures(run: ChallengeRun) -> dict:
-    """The figures of the run (the schema of run.py's summary.json)."""
-    return report.summary(run, compare(run))
+    """The figures of the run (the schema of run.py's summary.json, and ``prisms``)."""
+    out = report.summary(run, compare(run))
+    prisms = prism_figures(run)
+    if prisms:
+        out["prisms"] = prisms
+    return out
 
 
 ROWS = (("base plate, README region: RMS to plane (um)", ("base", "plane_rms_um"), 2),
@@ -207,6 +228,12 @@ def table(this: dict, reference: dict | None) -> str:
         refs = [REFERENCES[w].get(path, "") for w in ("laser", "pyvale")]
         lines.append(f"| {label} | {_get(this, path, digits)} | {_get(reference, path, digits)} | "
                      + " | ".join(str(r) for r in refs) + " |")
+    for name, prism in this.get("prisms", {}).items():
+        rms = " / ".join(f"{v:.2f}" for v in prism["rms_plane_um"].values())
+        lines += [f"| {name}: RMS of its faces to their planes (um), {' / '.join(prism['rms_plane_um'])} "
+                  f"| {rms} | | | |",
+                  f"| {name}: included angle (deg; nominal {prism['nominal_angle_deg']:.2f}) "
+                  f"| {prism['included_angle_deg']:.3f} | | | |"]
     return "\n".join(lines)
 
 

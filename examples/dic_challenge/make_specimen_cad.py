@@ -337,7 +337,8 @@ def expected_areas(features, height: float) -> dict:
 # Until the `cad` extra reads STEP and trimmed faces, `georeg measure` reads untrimmed
 # B-spline surfaces (IGES entity 128) only. This writes, through OpenCASCADE's IGES
 # translator, the faces the face-by-face run measures as such surfaces: the block top
-# (inset, block_top.toml), the bars' arcs about their crests (cylinder_*.toml), and in place
+# (inset, block_top.toml), the bars' arcs about their crests (cylinder_*.toml), the prisms'
+# four slanted faces (rectangles in the CAD: untrimmed already), and in place
 # of the trimmed plate three rectangles of it free of features (INTERIM_BASE_MM): one that
 # holds the README's flatness region and the east side of the block's ring, and one strip
 # beside each bar that holds its ring (the plate 1.5..6 mm from its footprint).
@@ -351,12 +352,17 @@ INTERIM_BASE_MM = {"base": ((-10.0, 49.0), (-49.0, 1.0)), "base_h": ((-47.0, -4.
 
 
 def _biquadratic(face):
-    """The face's surface as a B-spline of degree 2 in u and v (NURBS conversion, elevation)."""
+    """The face's surface as a B-spline of degree 2 in u and v (NURBS conversion, elevation),
+    its natural normal ``S_u x S_v`` the face's outward one (u reversed for a reversed face)."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.TopAbs import TopAbs_REVERSED
     from OCP.TopoDS import TopoDS
-    surface = BRep_Tool.Surface_s(TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape()))
+    converted = TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape())
+    surface = BRep_Tool.Surface_s(converted)
     surface.IncreaseDegree(max(2, surface.UDegree()), max(2, surface.VDegree()))
+    if converted.Orientation() == TopAbs_REVERSED:
+        surface.UReverse()
     return surface
 
 
@@ -380,6 +386,10 @@ def interim_surfaces(folder: Path = HERE) -> dict:
         half = np.radians(n.arc_deg / 2)
         out[name] = _biquadratic(BRepBuilderAPI_MakeFace(gp_Cylinder(frame, float(n.radius_mm)), -half, half,
                                                          0.0, float(np.linalg.norm(axis))).Face())
+    shape, features, height = specimen_solid(folder / "specimen.toml", folder / "block_top.toml")
+    for name, face in name_faces(shape, features, height).items():
+        if name.startswith("prism"):                    # untrimmed rectangles already
+            out[name] = _biquadratic(face)
     return out
 
 

@@ -50,6 +50,17 @@ def exact_faces() -> dict:
         start = np.r_[line[0, :2], AXIS_Z_MM]
         X = start + s[:, None] * axis + r * (np.sin(a)[:, None] * lateral + np.cos(a)[:, None] * [0, 0, 1.0])
         faces[name] = m.with_nodes(X)
+    specimen = load_face(HERE / "base.toml").specimen
+    for f in (f for f in specimen.features if f.kind == "wedge"):      # the nominal prisms
+        line = np.asarray(f.line_mm, float)
+        axis = line[1] - line[0]
+        lateral = np.cross(axis, [0.0, 0.0, 1.0])
+        lateral /= np.linalg.norm(lateral)
+        for side, sign in (("a", 1.0), ("b", -1.0)):
+            m = _grid((0.0, 1.0), (0.0, 1.0), 4, 8)
+            w, s = m.nodes[:, 0], m.nodes[:, 1]          # down the slope, along the ridge
+            foot = sign * f.half_width_mm * lateral - [0.0, 0.0, line[0, 2]]
+            faces[f"{f.name}_{side}"] = m.with_nodes(line[0] + s[:, None] * axis + w[:, None] * foot)
     return faces
 
 
@@ -91,6 +102,11 @@ def _check(figures):
         assert figures[name]["radius_mm"] == pytest.approx(r, abs=1e-5), name
         assert figures[name]["crest_above_ring_mm"] == pytest.approx(r + AXIS_Z_MM, abs=1e-5), name
         assert figures[name]["fit_rms_um"] < 0.1
+    for name in ("prism_h", "prism_v"):
+        prism = figures["prisms"][name]
+        assert prism["included_angle_deg"] == pytest.approx(prism["nominal_angle_deg"], abs=1e-6)
+        assert prism["nominal_angle_deg"] == pytest.approx(2 * np.degrees(np.arctan(6.4 / 6.9)), abs=1e-9)
+        assert max(prism["rms_plane_um"].values()) < 1e-3
 
 
 def test_part_vtu_gives_the_exact_dimensions(tmp_path, capsys):
