@@ -158,19 +158,27 @@ def challenge_run(points: dict, time_s: float | None, base_rectangles=None) -> C
     return ChallengeRun(measured, results, math.nan if time_s is None else float(time_s), None, None)
 
 
+#: the band of a prism's faces that the figures use, as fractions of the nominal ridge height
+#: (off the ridge and the foot, where a nominal of the wrong slope folds the measured face)
+PRISM_BAND = (0.2, 0.8)
+
+
 def prism_figures(run: ChallengeRun) -> dict:
-    """Per prism measured on both slanted faces: each face's RMS to its best-fit plane (um)
-    and the included angle between the two planes (deg), beside the nominal angle."""
+    """Per prism measured on both slanted faces, in the band ``PRISM_BAND`` of heights: each
+    face's RMS to its best-fit plane (um), the included angle between the two planes and
+    their slopes (deg), beside the nominal angle."""
     out = {}
     specimen = run.faces["base"].specimen
     for f in (f for f in specimen.features if f.kind == "wedge"):
         sides = sorted(k for k in run.results if k.startswith(f.name + "_"))
         if len(sides) != 2:
             continue
-        P = [run.results[k].points_mm for k in sides]
+        lo, hi = np.array(PRISM_BAND) * f.line_mm[0][2]
+        P = [p[(p[:, 2] >= lo) & (p[:, 2] <= hi)] for p in (run.results[k].points_mm for k in sides)]
         n = [analysis.plane_frame(p)[1][2] for p in P]
         out[f.name] = {"rms_plane_um": {k: 1e3 * analysis.rms(analysis.plane_residuals(p)) for k, p in zip(sides, P)},
                        "included_angle_deg": 180.0 - float(np.degrees(np.arccos(np.clip(n[0] @ n[1], -1, 1)))),
+                       "slope_deg": {k: float(np.degrees(np.arccos(v[2]))) for k, v in zip(sides, n)},
                        "nominal_angle_deg": float(2 * np.degrees(np.arctan2(f.half_width_mm, f.line_mm[0][2])))}
     return out
 
