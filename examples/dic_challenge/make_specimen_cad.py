@@ -433,10 +433,12 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
     try:
-        import OCP  # noqa: F401
+        from OCP.Message import Message, Message_Gravity
     except ImportError:
         print("make_specimen_cad.py: error: needs OpenCASCADE (pip install cadquery-ocp)", file=sys.stderr)
         return 1
+    for printer in Message.DefaultMessenger_s().Printers():    # OpenCASCADE's own chatter off
+        printer.SetTraceLevel(Message_Gravity.Message_Warning)
     faces = build(args.out)
     if args.interim_iges is not None:
         surfaces = interim_surfaces()
