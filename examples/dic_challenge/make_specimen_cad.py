@@ -1,6 +1,7 @@
 """Build the CAD of the Stereo DIC Challenge specimen's visible faces (STEP, named faces).
 
     python examples/dic_challenge/make_specimen_cad.py [--out data/dic_challenge_stereo/specimen.step]
+        [--interim-iges interim.igs]
 
 needs OpenCASCADE's Python binding (``cadquery-ocp``, the ``cad`` extra). The solid is the
 union of the base plate (a 101.6 mm square, top face at z = 0, centred at the origin: the
@@ -19,7 +20,10 @@ faces that the cameras can see, each named (STEP ``ADVANCED_FACE`` names through
 ========================  ========================================================
 
 in this order (12 faces). The bars' end caps and the plate's sides and bottom are left out.
-The faces share their edges (they come from one solid), so a reader can weld them.
+The faces share their edges (they come from one solid), so a reader can weld them. The file
+is read back and each face's area checked against the hand formula (:func:`expected_areas`).
+``--interim-iges`` also writes the faces of the face-by-face run as untrimmed IGES B-splines
+for today's ``georeg measure`` (see "interim IGES" below).
 """
 from __future__ import annotations
 
