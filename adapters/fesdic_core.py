@@ -15,6 +15,7 @@ import logging
 from typing import Mapping
 
 import numpy as np
+import scipy.sparse as sps
 
 from fesdic_core.elements import family_from_meshio
 from fesdic_core.gauge import rigid_normal_modes
@@ -22,7 +23,7 @@ from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
 from georeg_plugin.curved import is_flat
 from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.multipatch import part_component_space, part_mesh, part_space
-from georeg_plugin.operators import MultilevelSpace, multilevel_space
+from georeg_plugin.operators import MultilevelSpace, extraction_operator, multilevel_space
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_uniform, refine_to_elements
 from georeg_plugin.solver import GeometricRegularization
@@ -100,17 +101,19 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
                         uv=fe.uv)
 
 
-def part_model(faces, refinements: int, names=None, family: str = "Q9",
+def part_model(faces, refinements, names=None, family: str = "Q9",
                name: str = "part", loops=None) -> NominalModel:
     """FE mesh of a part of several faces (:func:`georeg_plugin.multipatch.part_mesh`):
-    every face refined ``refinements`` times dyadically, welded along shared edges; a face
+    every face refined ``refinements`` times dyadically (one count, or one per face),
+    welded along shared edges; a face
     with trimming ``loops`` (per face: outer then holes in its ``(u, v)``, or None) keeps
     the elements inside them.
 
     Raises :class:`~georeg_plugin.multipatch.NonConformingFacesError` naming two faces whose
     shared edge's nodes do not coincide."""
     faces = tuple(faces)
-    fine = [refine_uniform(f, int(refinements))[0] for f in faces]
+    counts = np.broadcast_to(np.asarray(refinements, dtype=int), (len(faces),))
+    fine = [refine_uniform(f, int(k))[0] for f, k in zip(faces, counts)]
     part = part_mesh(fine, names, family, loops=loops)
     block = CellBlock(family=family_from_meshio(part.cell_type), connectivity=part.connectivity)
     return NominalModel(patch=faces[0], mesh=SurfaceMesh(nodes=part.nodes, blocks=(block,),
@@ -200,10 +203,13 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
     preconditions of Eq. 16 are checked: spline degree <= element degree, and every
     element inside one knot span of the finest level (:func:`check_nested_mesh`).
     """
-    if model.is_part:                     # several faces: always the vector formulation
+    if model.is_part:          # several faces: vector, but a lone flat face or cylinder scalar
         _check_part_levels(model, n_levels)
+        scalar = [face_holds_rigid_motions(face, model.uv[model.node_face == f],
+                                           model.mesh.nodes[model.node_face == f])
+                  for f, face in enumerate(model.faces)]
         return part_space(model.faces, n_levels, model.uv, model.node_face,
-                          node_normals(model.mesh))
+                          node_normals(model.mesh), scalar=scalar)
     if curved is None:
         curved = is_curved(model)
     family = model.mesh.blocks[0].family.name if model.uv is not None else None
@@ -247,9 +253,19 @@ def scalar_holds_rigid_motions(model: NominalModel, space: MultilevelSpace) -> b
     """
     if model.uv is None:                  # no node parameters: no exact normals to check with
         return False
-    rigid, _ = rigid_normal_modes(np.asarray(model.mesh.nodes, dtype=float),
-                                  np.asarray(model.patch.normals(model.uv), dtype=float))
-    C = space.operators[-1].toarray()                        # the coarsest level (m, n_fe)
+    return face_holds_rigid_motions(model.patch, model.uv, model.mesh.nodes,
+                                    space.operators[-1])
+
+
+def face_holds_rigid_motions(face: SplinePatch, uv: np.ndarray, nodes: np.ndarray,
+                             C: sps.spmatrix | None = None) -> bool:
+    """:func:`scalar_holds_rigid_motions` for one face: its nodes ``nodes`` at parameters
+    ``uv``, ``C`` the face's coarsest scalar operator (default: ``R_J(xi_I)`` of ``face``)."""
+    if len(uv) == 0:
+        return False
+    rigid, _ = rigid_normal_modes(np.asarray(nodes, dtype=float),
+                                  np.asarray(face.normals(uv), dtype=float))
+    C = (extraction_operator(face, uv) if C is None else C).toarray()   # (m, n_nodes)
     coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
     residual = np.abs(rigid - C.T @ coeffs).max() / np.abs(rigid).max()
     logger.info("curved nominal: rigid normal motions outside the scalar spline space %.2g "
@@ -265,9 +281,12 @@ def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int
     By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
     the paper's section 3.3), clipped to the coarsest level. ``curved``: see
     :func:`multilevel_for_mesh`; by default (None) the shape's formulation follows the
-    nominal (vector when it is not planar).
+    nominal (vector when it is not planar). On a part of several faces the spline dofs that
+    no integration point sees (a bar's flank beyond the grazing cut-off, a plate strip a
+    feature hides) keep their value (``hold_unseen``) instead of stopping the measurement.
     """
-    return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
+    return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule,
+                                   hold_unseen=model.is_part)
 
 
 def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int = 0

@@ -35,6 +35,7 @@ import numpy as np
 
 from adapters.fesdic_core import NominalModel, nominal_model, part_model
 from georeg_plugin.iges import read_iges_surfaces
+from georeg_plugin.multipatch import NonConformingFacesError
 from georeg_plugin.trimmed import grid_triangles
 
 from .cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available
@@ -42,7 +43,7 @@ from .cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available
 logger = logging.getLogger(__name__)
 
 __all__ = ["CAD_SUFFIXES", "STEP_SUFFIXES", "check_cad_file", "cad_faces", "cad_part",
-           "cad_model", "cad_refinements", "cad_face_indices", "cad_occluders", "cad_triangles",
+           "cad_model", "cad_refinements", "face_refinements", "cad_face_indices", "cad_occluders", "cad_triangles",
            "read_cad_faces"]
 
 CAD_SUFFIXES = IGES_SUFFIXES + STEP_SUFFIXES
@@ -184,6 +185,22 @@ def cad_refinements(faces: Sequence, elements: int | None, levels: int) -> int:
     return max(levels - 1, math.ceil(math.log(max(target / coarse, 1.0), 4) - 1e-9))
 
 
+def face_refinements(part: Sequence[CadFace], elements: int | None, levels: int
+                     ) -> tuple[int, ...]:
+    """Dyadic refinements of each face so that the elements are of about one size over the
+    part: face ``f`` gets about ``elements * area_f / area`` of them (its area inside its
+    trimming loops), at least ``levels - 1`` refinements (the finest spline level refines
+    its FE mesh, Eq. 16)."""
+    def area(f: CadFace) -> float:
+        t = grid_triangles(f.patch, f.loops or None)
+        return 0.5 * float(np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]),
+                                          axis=1).sum())
+    areas = np.array([area(f) for f in part])
+    share = (elements or 1000) * areas / areas.sum()
+    return tuple(max(levels - 1, math.ceil(math.log(max(n / np.prod(f.patch.n_elements), 1.0), 4)
+                                           - 1e-9)) for n, f in zip(share, part))
+
+
 def cad_model(path: Path, faces: Sequence | None, elements: int | None,
               levels: int) -> NominalModel:
     """The nominal model of ``[geometry] kind = "cad"`` (see the module docstring)."""
@@ -197,6 +214,11 @@ def cad_model(path: Path, faces: Sequence | None, elements: int | None,
             return dataclasses.replace(model, face_names=names, element_face=np.zeros(
                 model.mesh.n_elements, dtype=int))              # the VTU's `face`, all 0
         loops = [f.loops if f.trimmed else None for f in part] if trimmed else None
-        return part_model(patches, k, names, "Q9", name=Path(path).stem, loops=loops)
+        try:                                 # elements of about one size over the part
+            return part_model(patches, face_refinements(part, elements, levels), names, "Q9",
+                              name=Path(path).stem, loops=loops)
+        except NonConformingFacesError as err:           # faces that meet need one count
+            logger.info("%s: %s; every face refined %d times", path, err, k)
+            return part_model(patches, k, names, "Q9", name=Path(path).stem, loops=loops)
     except ValueError as err:
         raise ValueError(f"{path}: {err}") from err

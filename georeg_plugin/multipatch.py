@@ -31,7 +31,7 @@ from typing import Sequence
 import numpy as np
 import scipy.sparse as sps
 
-from .curved import RANK_RTOL, vector_gluing, vector_level
+from .curved import RANK_RTOL, VectorLevel, vector_gluing, vector_level
 from .fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
 from .operators import MultilevelSpace, extraction_operator
 from .patch import SplinePatch, invert_points
@@ -40,7 +40,8 @@ from .trimmed import trim_mesh
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PartMesh", "part_mesh", "part_space", "part_component_space", "NonConformingFacesError"]
+__all__ = ["PartMesh", "part_mesh", "part_space", "part_component_space", "isolated_faces",
+           "NonConformingFacesError"]
 
 
 class NonConformingFacesError(ValueError):
@@ -172,13 +173,48 @@ def _check_conforming(faces, meshes, offsets, representative, names, tol, trimme
                     "same knot spans along their shared edge")
 
 
+def isolated_faces(faces: Sequence[SplinePatch]) -> np.ndarray:
+    """bool (n_faces,): the faces that share no control point with another face."""
+    G = vector_gluing(faces).tocsc()                              # (points, control points)
+    shared = np.asarray(G.sum(axis=1)).ravel() > 1                # points of several cps
+    owner = np.repeat(np.arange(len(faces)), [f.n_dofs for f in faces])
+    point = G.indices                                             # cp -> its point (csc)
+    # a point of several control points of ONE face (a closed face's seam) is no contact
+    touched = np.zeros(len(faces), dtype=bool)
+    for pt in np.flatnonzero(shared):
+        members = np.unique(owner[point == pt])
+        if members.size > 1:
+            touched[members] = True
+    return ~touched
+
+
+def _scalar_face_level(face: SplinePatch, rows: np.ndarray, uv: np.ndarray, n_fe: int
+                       ) -> tuple[sps.csr_matrix, np.ndarray]:
+    """A face's scalar operator ``C^T[I, J] = R_J(xi_I)`` on its nodes (control points that no
+    node sees left out) and its control vectors per dof, ``d_J = c_J n_J`` (the control
+    normal at the Greville point; as the one-patch output of a curved face)."""
+    local = extraction_operator(face, uv).tocoo()                 # (n_cp, k)
+    C = sps.csr_matrix((local.data, (local.row, rows[local.col])), shape=(local.shape[0], n_fe))
+    seen = np.flatnonzero(np.asarray(abs(C).sum(axis=1)).ravel() > 0)
+    normals = face.control_normals()[seen]                        # (r, 3)
+    T = np.zeros((3 * face.n_dofs, seen.size))
+    for k in range(3):
+        T[3 * seen + k, np.arange(seen.size)] = normals[:, k]
+    return C[seen], T
+
+
 def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarray,
                node_face: np.ndarray, node_normals: np.ndarray, glue: bool = True,
-               rtol: float = RANK_RTOL) -> MultilevelSpace:
+               rtol: float = RANK_RTOL, scalar: Sequence[bool] | None = None) -> MultilevelSpace:
     """The spline levels of a part: every face refined dyadically, vector control points
     glued where faces share them (:func:`~georeg_plugin.curved.vector_level`).
 
     ``uv``, ``node_face``: a :class:`PartMesh`'s; ``node_normals`` (n, 3): the FE unknowns'.
+    ``scalar``: per face, True to give it the scalar space ``R_J(xi_I)`` of a one-patch
+    model (the caller checks that this space holds the face's rigid normal motions: a flat
+    face or a cylinder) instead of the vector formulation, whose extra weak directions cost
+    accuracy; honoured only for a face that shares no control point with another face
+    (:func:`isolated_faces`: continuity across a shared edge needs the vector one).
 
     ``MultilevelSpace.patches[k]`` is then the tuple of the faces of level ``k`` (coarse to
     fine); ``space.vector`` holds the control vectors of each level.
@@ -189,16 +225,35 @@ def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarra
     for _ in range(int(n_levels) - 1):
         levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
     node_face = np.asarray(node_face)
-    rows = [np.flatnonzero(node_face == k) for k in range(len(levels[0]))]
+    n_faces = len(levels[0])
+    rows = [np.flatnonzero(node_face == k) for k in range(n_faces)]
     uvs = [np.asarray(uv)[r] for r in rows]
     n_fe = len(node_face)
-    vector = [vector_level(faces, rows, uvs, node_normals, n_fe, glue, rtol)
-              for faces in reversed(levels)]
-    if glue:
-        shared = vector_gluing(levels[0])
-        logger.info("part space: %d faces, %d levels, ranks %s, %d control points glued at "
-                    "the coarsest level", len(levels[0]), len(levels),
-                    [v.operator.shape[0] for v in vector], shared.shape[1] - shared.shape[0])
+    alone = np.zeros(n_faces, dtype=bool) if scalar is None else \
+        np.asarray(scalar, dtype=bool) & isolated_faces(levels[0])
+    vec = np.flatnonzero(~alone)
+    vector = []
+    for faces in reversed(levels):
+        offsets = 3 * np.cumsum([0] + [f.n_dofs for f in faces])
+        operators, coefficients = [], []
+        if vec.size:
+            lv = vector_level([faces[k] for k in vec], [rows[k] for k in vec],
+                              [uvs[k] for k in vec], node_normals, n_fe, glue, rtol)
+            T = np.zeros((offsets[-1], lv.operator.shape[0]))
+            T[np.concatenate([np.arange(offsets[k], offsets[k + 1]) for k in vec])] = \
+                lv.coefficients
+            operators.append(lv.operator)
+            coefficients.append(T)
+        for k in np.flatnonzero(alone):
+            C, Tk = _scalar_face_level(faces[k], rows[k], uvs[k], n_fe)
+            T = np.zeros((offsets[-1], C.shape[0]))
+            T[offsets[k]:offsets[k + 1]] = Tk
+            operators.append(C)
+            coefficients.append(T)
+        vector.append(VectorLevel(operator=sps.vstack(operators).tocsr(),
+                                  coefficients=np.hstack(coefficients)))
+    logger.info("part space: %d faces (%d in the scalar space), %d levels, ranks %s",
+                n_faces, int(alone.sum()), len(levels), [v.operator.shape[0] for v in vector])
     return MultilevelSpace(patches=tuple(tuple(f) for f in levels),
                            operators=tuple(v.operator for v in vector), vector=tuple(vector))
 

@@ -179,13 +179,17 @@ def test_a_file_without_faces_is_named(tmp_path):
 
 
 def test_the_whole_cylinder_is_one_part_with_trimmed_discs_and_glued_levels():
-    """Three faces, one mesh: the discs (trimmed) keep their elements inside the rim, not
-    welded to the lateral face there (the staircase); the spline levels build."""
+    """Three faces, one mesh: each face refined for elements of about one size (by its
+    area), the discs (trimmed) keep their elements inside the rim, not welded to the lateral
+    face there (the staircase); the spline levels build."""
     from adapters.fesdic_core import multilevel_for_mesh
-    model = cad_model(DATA / "cylinder.step", None, 300, 2)      # 3 dyadic refinements
+    from georeg_app.cad import cad_part, face_refinements
+    model = cad_model(DATA / "cylinder.step", None, 300, 2)
     counts = np.bincount(model.element_face)
     lateral = int(np.flatnonzero([f.is_rational for f in model.faces])[0])
-    assert counts[lateral] == np.prod(model.faces[lateral].n_elements) * 4 ** 3
+    k = face_refinements(cad_part(DATA / "cylinder.step"), 300, 2)   # by area: 200 / 50 / 50
+    assert k[lateral] == 4 and sorted(k) == [3, 3, 4]
+    assert counts[lateral] == np.prod(model.faces[lateral].n_elements) * 4 ** 4
     connectivity = model.mesh.blocks[0].connectivity
     for f, face in enumerate(model.faces):
         x = model.mesh.nodes[np.unique(connectivity[model.element_face == f])]
