@@ -223,6 +223,9 @@ def main() -> None:
     p.add_argument("--cases", default="demo,bump,bump-noise")
     p.add_argument("--edge-margin", type=float, default=None,
                    help="[method] edge_margin_px of every case (default: the config's default)")
+    p.add_argument("--max-view-angle", type=float, default=None,
+                   help="[method] max_view_angle_deg of every case (default: the config's; 90: "
+                        "no grazing cut-off)")
     p.add_argument("--repeat", type=int, default=3, help="runs per case (noise seeds)")
     p.add_argument("--coarse", choices=("same", "none", "half"), default="same",
                    help="prefilter of the coarse scales (same sigma in coarse px, none, sigma / 2)")
@@ -257,6 +260,9 @@ def main() -> None:
             scene = makers[case]()
             if args.edge_margin is not None:
                 scene.method = dataclasses.replace(scene.method, edge_margin_px=args.edge_margin)
+            if args.max_view_angle is not None:
+                scene.method = dataclasses.replace(scene.method,
+                                                   max_view_angle_deg=args.max_view_angle)
             print(f"\n{case}: rendered in {time.perf_counter() - t:.1f} s", flush=True)
             for order, pf in [(o, p) for o in orders for p in prefilters]:
                 runs = [run_case(scene, pf, k, image_class, Path(tmp), order) for k in range(args.repeat)]
