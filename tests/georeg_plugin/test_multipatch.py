@@ -23,6 +23,16 @@ def folded_faces(degrees=(2, 2)):
     return [left, right]
 
 
+def two_faces(shape):
+    """The folded plate, or a 120 degree cylinder cut at its C0 knot into 2 faces."""
+    if shape == "folded":
+        return folded_faces()
+    p = cylinder(50.0, 40.0, 120.0)
+    cp, w, k = p.control_points, p.weights, np.array([0, 0, 0, 1, 1, 1.0])
+    return [SplinePatch((2, 2), (k, p.knots[1]), cp[:3], w[:3]),
+            SplinePatch((2, 2), (k, p.knots[1]), cp[2:], w[2:])]
+
+
 def face_normals(mesh, faces):
     """Unit normals of each node on its own face, and the mean of both faces on the crease."""
     n = np.vstack([faces[f].normals(mesh.uv[[i]]) for i, f in enumerate(mesh.node_face)])
@@ -66,13 +76,7 @@ def test_a_bicubic_face_is_meshed_on_the_surface(caplog):
 
 @pytest.mark.parametrize("shape", ["folded", "cylinder"])
 def test_part_levels_are_nested_glued_and_hold_the_rigid_modes(shape):
-    if shape == "folded":
-        coarse = folded_faces()
-    else:                                 # a 120 degree cylinder cut at its C0 knot: 2 faces
-        p = cylinder(50.0, 40.0, 120.0)
-        cp, w, k = p.control_points, p.weights, np.array([0, 0, 0, 1, 1, 1.0])
-        coarse = [SplinePatch((2, 2), (k, p.knots[1]), cp[:3], w[:3]),
-                  SplinePatch((2, 2), (k, p.knots[1]), cp[2:], w[2:])]
+    coarse = two_faces(shape)
     n_levels = 3
     fine = [refine_uniform(f, n_levels)[0] for f in coarse]
     mesh = part_mesh(fine)
@@ -108,13 +112,7 @@ def test_part_component_levels_are_glued_nested_and_hold_the_part_s_affine_field
     control point (one row of points fewer), a field that is one affine function of X on
     the whole part (a rigid translation, a homogeneous strain's component) is in every
     level's range, and the levels are nested (Eq. 13)."""
-    if shape == "folded":
-        coarse = folded_faces()
-    else:                                 # a 120 degree cylinder cut at its C0 knot: 2 faces
-        p = cylinder(50.0, 40.0, 120.0)
-        cp, w, k = p.control_points, p.weights, np.array([0, 0, 0, 1, 1, 1.0])
-        coarse = [SplinePatch((2, 2), (k, p.knots[1]), cp[:3], w[:3]),
-                  SplinePatch((2, 2), (k, p.knots[1]), cp[2:], w[2:])]
+    coarse = two_faces(shape)
     n_levels = 3
     fine = [refine_uniform(f, n_levels - 1)[0] for f in coarse]
     mesh = part_mesh(fine)
@@ -130,5 +128,42 @@ def test_part_component_levels_are_glued_nested_and_hold_the_part_s_affine_field
         assert np.abs(fields - C.T @ coeffs).max() < 1e-10 * np.abs(fields).max()
         if s + 1 < n_levels:
             Cc = space.operators[s + 1].toarray()
+            inside, *_ = np.linalg.lstsq(C.T, Cc.T, rcond=None)
+            assert np.abs(Cc.T - C.T @ inside).max() < 1e-10
+
+
+def test_a_lone_face_may_take_the_scalar_space_and_the_part_stays_nested_and_rigid():
+    """The folded plate (two glued faces: vector) and a cylinder panel apart from it (no
+    shared control point: `isolated_faces`) in one part; with `scalar` the panel gets its
+    scalar space `R_J(xi_I)` (one dof per control point), the glued faces keep the vector
+    formulation whatever they are asked: every level holds the part's rigid normal motions
+    and is nested in the next finer one (Eq. 13)."""
+    from georeg_plugin.geometries import transformed
+    from georeg_plugin.multipatch import isolated_faces
+    panel = transformed(cylinder(100.0, 40.0, 30.0), translation=(0.0, 0.0, 40.0))
+    coarse = folded_faces() + [panel]
+    assert isolated_faces(coarse).tolist() == [False, False, True]
+    n_levels = 3
+    fine = [refine_uniform(f, n_levels)[0] for f in coarse]
+    mesh = part_mesh(fine)
+    normals = face_normals(mesh, fine)
+    on_panel = mesh.node_face == 2
+    normals[on_panel] = fine[2].normals(mesh.uv[on_panel])
+    vector = part_space(coarse, n_levels, mesh.uv, mesh.node_face, normals)
+    mixed = part_space(coarse, n_levels, mesh.uv, mesh.node_face, normals, scalar=[True] * 3)
+    X = mesh.nodes
+    rigid = np.column_stack([normals] + [np.einsum("kd,kd->k", normals, np.cross(e, X))
+                                         for e in np.eye(3)])
+    for s in range(n_levels):
+        C, V = mixed.operators[s].toarray(), vector.operators[s].toarray()
+        n_panel = mixed.patch(s)[2].n_dofs
+        panel_rows = np.abs(C[:, ~on_panel]).sum(axis=1) == 0
+        assert panel_rows.sum() == n_panel                      # one dof per control point
+        assert (np.abs(V[:, ~on_panel]).sum(axis=1) == 0).sum() > n_panel   # vector: more
+        assert (~panel_rows).sum() == (np.abs(V[:, ~on_panel]).sum(axis=1) > 0).sum()
+        coeffs, *_ = np.linalg.lstsq(C.T, rigid, rcond=None)
+        assert np.abs(rigid - C.T @ coeffs).max() < 1e-9 * np.abs(rigid).max()
+        if s + 1 < n_levels:
+            Cc = mixed.operators[s + 1].toarray()
             inside, *_ = np.linalg.lstsq(C.T, Cc.T, rcond=None)
             assert np.abs(Cc.T - C.T @ inside).max() < 1e-10
