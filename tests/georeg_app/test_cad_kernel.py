@@ -255,3 +255,18 @@ def test_step_lengths_are_converted_to_mm(tmp_path):
     (face,) = read_cad_faces(path)
     hole = face.patch.evaluate(face.loops[1])
     np.testing.assert_allclose(np.hypot(hole[:, 0], hole[:, 1]), 8000.0, rtol=1e-9)
+
+
+def test_the_faces_not_measured_are_the_occluders():
+    """`cad_occluders`: the triangles of the faces the selection leaves out (the cylinder's
+    two discs when its lateral face is measured: their area, on two planes 20 mm apart),
+    None when every face is measured."""
+    from georeg_app.cad import cad_occluders, read_cad_faces
+    faces = read_cad_faces(DATA / "cylinder.step")
+    lateral = next(k for k, f in enumerate(faces) if f.patch.is_rational)
+    t = cad_occluders(DATA / "cylinder.step", [lateral])
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum()
+    assert abs(area - 2 * np.pi * 10.0 ** 2) < 0.01 * 2 * np.pi * 10.0 ** 2
+    heights = np.unique(np.round(t[..., 2], 6))
+    assert heights.size == 2 and np.isclose(np.ptp(heights), 20.0)
+    assert cad_occluders(DATA / "cylinder.step", None) is None
