@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from adapters.fesdic_core import (NominalModel, georeg_solver, is_curved, measured_spline,
+from adapters.fesdic_core import (NominalModel, georeg_solver, measured_spline,
                                   measured_spline_std, nominal_model)
 from adapters.level_search import LevelSearch, measure_auto_levels
 from fesdic_core.accuracy import shape_error_to_surface
@@ -37,13 +37,13 @@ from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm
 from fesdic_core.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
                              stereo_transform, write_cameras_json)
 from fesdic_core.tikhonov import TikhonovSolver
-from fesdic_core.visibility import VisibilitySettings
 from georeg_plugin.geometries import plate_with_hole, rectangle
 from georeg_plugin.patch import SplinePatch
 from georeg_plugin.refine import refine_to_elements
 
 from . import installed_version
-from .cad import cad_faces, cad_model, cad_occluders, cad_refinements
+from .cad import cad_faces, cad_model, cad_refinements
+from .run_visibility import scene_occluders, visibility_settings
 from .config import (AUTO, CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
                      OutputConfig)
 from .methods import MethodSpec, default_specs  # noqa: F401 (the pipeline's contract)
@@ -273,33 +273,6 @@ def input_files(config: Config) -> tuple:
         entries.append(("configuration", config.source))
     return tuple((label, str(path), _checksum(path)) for label, path in entries
                  if path is not None and Path(path).is_file())
-
-
-def visibility_settings(method: MethodConfig, model: NominalModel | None = None,
-                        occluders: np.ndarray | None = None) -> VisibilitySettings | None:
-    """The core's visibility settings of ``[method] self_occlusion, max_view_angle_deg``
-    (None when both are off: every point kept).
-
-    Self-occlusion is cast only where something can hide the surface: a part of several
-    faces, a curved face, or ``occluders`` (the CAD faces that are not measured). A single
-    flat face cannot hide itself, and the ray casting (about 1.4 s on the demo's mesh) is
-    skipped there.
-    """
-    angle = None if method.max_view_angle_deg >= 90.0 else method.max_view_angle_deg
-    can_hide = (model is None or model.is_part or is_curved(model) or occluders is not None)
-    occlusion = method.self_occlusion and can_hide
-    if not occlusion and angle is None:
-        return None
-    return VisibilitySettings(self_occlusion=occlusion, max_view_angle_deg=angle,
-                              extra_occluders=occluders if occlusion else None)
-
-
-def scene_occluders(geometry: GeometryConfig) -> np.ndarray | None:
-    """Triangles (m, 3, 3) mm of what the nominal CAD holds besides the measured faces
-    (``[geometry] kind = "cad"`` with ``faces``), else None."""
-    if geometry.kind != "cad":
-        return None
-    return cad_occluders(geometry.file, geometry.faces)
 
 
 def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config: Config,

@@ -4,7 +4,7 @@ import pytest
 
 from fesdic_core.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG, VisibilitySettings
 from georeg_app.config import ConfigError, MethodConfig
-from georeg_app.pipeline import visibility_settings
+from georeg_app.run_visibility import visibility_settings
 from test_config_prefilter import _load      # a minimal config with the [method] lines given
 
 
@@ -43,3 +43,23 @@ def test_bad_values_name_the_key_and_value(tmp_path, text, expected):
     with pytest.raises(ConfigError) as info:
         _load(tmp_path, text)
     assert expected in str(info.value), str(info.value)
+
+
+def test_self_occlusion_is_cast_only_where_something_can_hide_the_surface():
+    """A single flat face cannot hide itself: no ray casting (the grazing test stays); a
+    curved face, a part of several faces, or extra occluders (CAD faces not measured) do."""
+    import numpy as np
+    from adapters.fesdic_core import nominal_model, part_model
+    from georeg_plugin.geometries import cylinder, quadrilateral, rectangle
+    method = MethodConfig()
+    flat = nominal_model(rectangle(40.0, 30.0), 2, "Q9")
+    v = visibility_settings(method, flat)
+    assert not v.self_occlusion and v.max_view_angle_deg == DEFAULT_MAX_VIEW_ANGLE_DEG
+    wall = np.zeros((2, 3, 3))
+    v = visibility_settings(method, flat, wall)
+    assert v.self_occlusion and np.array_equal(v.extra_occluders, wall)
+    assert visibility_settings(method, nominal_model(cylinder(100.0, 40.0, 30.0), 2, "Q9")
+                               ).self_occlusion
+    halves = [quadrilateral([[-20, -15, 0], [0, -15, 0], [0, 15, 0], [-20, 15, 0]], (2, 2)),
+              quadrilateral([[0, -15, 0], [20, -15, 0], [20, 15, 0], [0, 15, 0]], (2, 2))]
+    assert visibility_settings(method, part_model(halves, 1)).self_occlusion
