@@ -136,16 +136,21 @@ def test_track_measures_the_reference_shape_first(series, tmp_path):
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
 
 
+def _write_halves(folder):
+    """The plate as a CAD part: its two halves, IGES faces sharing the edge x = 0."""
+    from georeg_plugin.geometries import quadrilateral
+    from georeg_plugin.spline_io import write_iges
+    halves = [quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2)),
+              quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))]
+    write_iges(folder / "halves.igs", halves, names=["left", "right"])
+
+
 def test_track_follows_a_cad_part_of_two_faces(series, tmp_path):
     """The reference shape measured on a CAD part (the plate as two faces sharing an edge,
     from IGES): the part keeps its faces through the series, the georeg displacement runs on
     their glued component levels and the frame's VTU has the cell data `face`."""
-    from georeg_plugin.geometries import quadrilateral
-    from georeg_plugin.spline_io import write_iges
     folder, mesh = series
-    left = quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2))
-    right = quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))
-    write_iges(folder / "halves.igs", [left, right], names=["left", "right"])
+    _write_halves(folder)
     out = tmp_path / "out"
     extra = ('[cameras]\nfile = "cameras.json"\n[geometry]\nkind = "cad"\nfile = "halves.igs"\n'
              'elements = 32\n[method]\nname = "georeg"\nlevels = 2\ncalibrate = false\nscales = 2')
@@ -165,12 +170,8 @@ def test_track_follows_a_cad_part_of_two_faces(series, tmp_path):
 def test_a_part_s_measure_folder_as_reference_is_refused_naming_the_way(series, tmp_path, capsys):
     """A `georeg measure` folder of a CAD part cannot be rebuilt as a part (no face
     parameters saved): refused naming its spline file and the configuration that works."""
-    from georeg_plugin.geometries import quadrilateral
-    from georeg_plugin.spline_io import write_iges
     folder, _ = series
-    halves = [quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2)),
-              quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))]
-    write_iges(folder / "halves.igs", halves, names=["left", "right"])
+    _write_halves(folder)
     shape = tmp_path / "shape"
     measure = folder / "measure_part.toml"
     measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
