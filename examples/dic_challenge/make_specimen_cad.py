@@ -14,12 +14,13 @@ faces that the cameras can see, each named (STEP ``ADVANCED_FACE`` names through
 ``base``                  the plate's top face, the five footprints trimmed out (inner wires)
 ``block_top``             the block's top face
 ``block_wall_xm`` ...     the block's four walls, by outward normal: ``xm`` (-x), ``xp``, ``ym``, ``yp``
-``cylinder_h``, ``_v``    the half-cylinders' curved faces (above the plate; axes below it)
+``cylinder_h``, ``_v``    the half-cylinders' crests, +-40 degrees about the top (axes below the plate)
 ``prism_h_ym``, ``_yp``   the horizontal prism's slanted faces, by outward normal (-y, +y)
 ``prism_v_xm``, ``_xp``   the vertical prism's slanted faces, by outward normal (-x, +x)
+``cylinder_h_flank_a`` .. the bars' flanks, from the crest face down to the plate (a, b)
 ========================  ========================================================
 
-in this order (12 faces). The bars' end caps and the plate's sides and bottom are left out.
+in this order (16 faces). The bars' end caps and the plate's sides and bottom are left out.
 The faces share their edges (they come from one solid), so a reader can weld them. The file
 is read back and each face's area checked against the hand formula (:func:`expected_areas`).
 ``--interim-iges`` also writes the faces of the face-by-face run as untrimmed IGES B-splines
@@ -47,7 +48,11 @@ PLATE_MM = 101.6
 BELOW_MM = 10.0
 #: the faces written, in this order
 FACE_NAMES = ("base", "block_top", "block_wall_xm", "block_wall_xp", "block_wall_ym", "block_wall_yp",
-              "cylinder_h", "cylinder_v", "prism_h_ym", "prism_h_yp", "prism_v_xm", "prism_v_xp")
+              "cylinder_h", "cylinder_v", "prism_h_ym", "prism_h_yp", "prism_v_xm", "prism_v_xp",
+              "cylinder_h_flank_a", "cylinder_h_flank_b", "cylinder_v_flank_a", "cylinder_v_flank_b")
+#: each bar's curved face is split along its length: a crest face of +-CREST_DEG about the
+#: top (the arc both cameras see, as cylinder_*.toml) and two flank faces down to the plate
+CREST_DEG = 40.0
 DEFAULT_OUT = HERE.parent.parent / "data" / "dic_challenge_stereo" / "specimen.step"
 
 
@@ -184,10 +189,10 @@ def name_faces(shape, features, height: float) -> dict:
             if name in named:
                 raise RuntimeError(f"two faces classified as {name!r}")
             named[name] = face
-    missing = [n for n in FACE_NAMES if n not in named]
+    missing = [n for n in FACE_NAMES if n not in named and "_flank_" not in n]
     if missing:
         raise RuntimeError(f"faces not found in the union: {missing}")
-    return {n: named[n] for n in FACE_NAMES}
+    return named
 
 
 def write_step(path: Path, faces: dict) -> None:
@@ -324,7 +329,9 @@ def expected_areas(features, height: float) -> dict:
         if f.kind == "half_cylinder":
             z0, r = float(line[0, 2]), float(f.radius_mm)
             half = np.arccos(-z0 / r)                   # from the crest down to z = 0
-            out[f.name] = 2 * half * r * length
+            crest = np.radians(CREST_DEG)
+            out[f.name] = 2 * crest * r * length
+            out[f"{f.name}_flank_a"] = out[f"{f.name}_flank_b"] = (half - crest) * r * length
             footprints += 2 * np.sqrt(r * r - z0 * z0) * length
         else:
             slant = np.hypot(f.half_width_mm, line[0, 2])
@@ -420,10 +427,40 @@ def write_interim_iges(path: Path, surfaces: dict) -> None:
         raise RuntimeError(f"{path}: OpenCASCADE could not write the IGES file")
 
 
+def bar_faces(f: Feature) -> dict:
+    """A bar's curved face split along its length: ``name`` (the crest, +-``CREST_DEG``
+    about the top), ``name_flank_a`` and ``_b`` (down to the plate, z = 0): faces of the
+    exact cylinder over rectangles of its (angle, length) parameters, outward normals."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_CylindricalSurface
+    from OCP.gp import gp_Ax3, gp_Dir
+    line = np.asarray(f.line_mm, float)
+    axis, _ = _lateral(line)
+    unit = axis / np.linalg.norm(axis)
+    up = np.array([0.0, 0.0, 1.0]) - unit[2] * unit
+    up /= np.linalg.norm(up)
+    x_dir = np.cross(up, unit)                     # y = axis x x = up: the crest at u = 90 deg
+    frame = gp_Ax3(_pnt(line[0]), gp_Dir(*unit), gp_Dir(*x_dir))
+    surface = Geom_CylindricalSurface(frame, float(f.radius_mm))
+    r, z0, length = float(f.radius_mm), float(line[0, 2]), float(np.linalg.norm(axis))
+    foot = np.arcsin(-z0 / r)                      # the angle where the cylinder meets z = 0
+    c = np.radians(CREST_DEG)
+    spans = {f.name: (np.pi / 2 - c, np.pi / 2 + c),
+             f"{f.name}_flank_a": (foot, np.pi / 2 - c),
+             f"{f.name}_flank_b": (np.pi / 2 + c, np.pi - foot)}
+    return {name: BRepBuilderAPI_MakeFace(surface, float(u0), float(u1), 0.0, length, 1e-7).Face()
+            for name, (u0, u1) in spans.items()}
+
+
 def build(out: Path = DEFAULT_OUT) -> dict:
-    """Build the union, name its visible faces, write ``out``; the named faces."""
+    """Build the union, name its visible faces (the bars split into crest and flanks), write
+    ``out``; the named faces."""
     shape, features, height = specimen_solid(HERE / "specimen.toml", HERE / "block_top.toml")
-    faces = name_faces(shape, features, height)
+    named = name_faces(shape, features, height)
+    for f in features:
+        if f.kind == "half_cylinder":
+            named.update(bar_faces(f))
+    faces = {n: named[n] for n in FACE_NAMES}
     write_step(out, faces)
     return faces
 

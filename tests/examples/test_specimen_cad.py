@@ -1,6 +1,6 @@
 """The committed CAD of the Stereo DIC Challenge specimen (data/dic_challenge_stereo/specimen.step).
 
-Read back with OpenCASCADE (skipped without it): the 12 named faces in order, each face's
+Read back with OpenCASCADE (skipped without it): the 16 named faces in order, each face's
 area against the hand formula from the features of specimen.toml, the cylinders' radii
 and the prisms' slopes at points sampled on the faces, the base's footprints trimmed out
 (points classified against the face), and the file is what make_specimen_cad.py builds.
@@ -49,12 +49,18 @@ def test_surfaces_lie_where_the_features_put_them(faces):
     for f in SPECIMEN.features:
         line = np.asarray(f.line_mm) if f.line_mm is not None else None
         if f.kind == "half_cylinder":
-            P = cad.face_points(faces[f.name])
+            P = cad.face_points(faces[f.name])                   # the crest face
             assert len(P) > 20
             np.testing.assert_allclose(cad.distance_to_line(P, line), f.radius_mm, atol=1e-7)
-            assert P[:, 2].min() == pytest.approx(0.0, abs=1e-7)          # cut by the plate
             crest = line[0, 2] + f.radius_mm                     # sampled within the 0.05 mm deflection
             assert crest - 0.05 < P[:, 2].max() <= crest + 1e-9
+            low = line[0, 2] + f.radius_mm * np.cos(np.radians(cad.CREST_DEG))
+            assert P[:, 2].min() == pytest.approx(low, abs=1e-7)          # +-40 deg about the top
+            for side in ("a", "b"):
+                F = cad.face_points(faces[f"{f.name}_flank_{side}"])
+                np.testing.assert_allclose(cad.distance_to_line(F, line), f.radius_mm, atol=1e-7)
+                assert F[:, 2].min() == pytest.approx(0.0, abs=1e-7)      # down to the plate
+                assert F[:, 2].max() == pytest.approx(low, abs=1e-7)
         elif f.kind == "wedge":
             ridge = line.copy()
             for side in [n for n in cad.FACE_NAMES if n.startswith(f.name)]:
