@@ -173,6 +173,15 @@ def _check_conforming(faces, meshes, offsets, representative, names, tol, trimme
                     "same knot spans along their shared edge")
 
 
+def dyadic_levels(coarse_faces: Sequence[SplinePatch], n_levels: int) -> list[list[SplinePatch]]:
+    """The faces of every level, coarse to fine: each level halves every knot span of the
+    previous one (Eq. 28)."""
+    levels = [list(coarse_faces)]
+    for _ in range(int(n_levels) - 1):
+        levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
+    return levels
+
+
 def isolated_faces(faces: Sequence[SplinePatch]) -> np.ndarray:
     """bool (n_faces,): the faces that share no control point with another face."""
     G = vector_gluing(faces).tocsc()                              # (points, control points)
@@ -221,9 +230,7 @@ def part_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv: np.ndarra
     """
     if int(n_levels) < 1:
         raise ValueError(f"n_levels must be >= 1, got {n_levels}")
-    levels = [list(coarse_faces)]
-    for _ in range(int(n_levels) - 1):
-        levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
+    levels = dyadic_levels(coarse_faces, n_levels)
     node_face = np.asarray(node_face)
     n_faces = len(levels[0])
     rows = [np.flatnonzero(node_face == k) for k in range(n_faces)]
@@ -270,9 +277,7 @@ def part_component_space(coarse_faces: Sequence[SplinePatch], n_levels: int, uv:
     """
     if int(n_levels) < 1:
         raise ValueError(f"n_levels must be >= 1, got {n_levels}")
-    levels = [list(coarse_faces)]
-    for _ in range(int(n_levels) - 1):
-        levels.append([refine_uniform(f, 1)[0] for f in levels[-1]])
+    levels = dyadic_levels(coarse_faces, n_levels)
     node_face, uv = np.asarray(node_face), np.asarray(uv)
     n_fe = len(node_face)
     operators = []

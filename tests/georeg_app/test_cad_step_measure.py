@@ -24,6 +24,7 @@ from georeg_app.pipeline import Truth, run_methods                              
 from shape_truth import bounded_shape_error, rms                                # noqa: E402
 from scenes import Scene, cad_scene                                             # noqa: E402
 from user_data import write_user_data                                           # noqa: E402
+from test_cad import _config_file        # the [geometry] kind = "cad" config   # noqa: E402
 
 STEP = Path(__file__).resolve().parents[1] / "data" / "cad" / "plate_hole.step"
 L, W, R, BOW, WAVE = 60.0, 40.0, 8.0, 0.04, 0.03
@@ -82,22 +83,7 @@ def test_georeg_measures_the_trimmed_step_plate_within_5_um_and_beats_fe_and_tik
 
 def test_measure_from_the_step_file_on_the_command_line(scene, tmp_path):
     folder = scene[0]
-    config = folder / "config.toml"
-    config.write_text(f"""
-[images]
-cam0 = "cam0.png"
-cam1 = "cam1.png"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "cad"
-file = "{STEP.as_posix()}"
-elements = 256
-[method]
-name = "georeg"
-levels = 2
-scales = 1
-""")
+    config = _config_file(folder, file=STEP.as_posix(), extra="elements = 256")
     out = tmp_path / "out"
     assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 0
     assert list(out.glob("*.vtu")) and list(out.glob("*_spline.igs"))
