@@ -36,6 +36,8 @@ import numpy as np
 
 from fesdic_core.atomic import temporary_folder, write_bytes_atomic, write_text_atomic
 
+from .config import AUTO
+
 logger = logging.getLogger(__name__)
 
 SUMMARY_FILE = "summary.json"
@@ -204,7 +206,11 @@ def _levels_chosen(result) -> dict | None:
     if search is not None:
         return search.as_dict()
     levels = getattr(result.spec, "levels", None)
-    return None if levels is None else {"fixed_levels": int(levels), "chosen_level": 0}
+    if levels is None:
+        return None
+    if levels == AUTO:                    # the search did not finish (the method failed first)
+        return {"levels": AUTO, "chosen_level": None}
+    return {"fixed_levels": int(levels), "chosen_level": 0}
 
 
 def summary_dict(run) -> dict:

@@ -145,6 +145,22 @@ def test_the_level_search_chooses_the_levels_of_a_part(parts, part):
     assert rms(bounded_shape_error(r.measurement.nodes, scene.specimen)) <= 5e-3
 
 
+def test_swapped_images_fail_loudly_with_the_level_search(parts, tmp_path, capsys):
+    """The folded part's images swapped, levels = "auto": the measurement fails and the error
+    says why (it once said "invalid literal for int()": the summary of a search that had
+    not finished); exit 1, nothing written."""
+    folder, _ = parts["folded"]
+    config = _config_file(folder)
+    text = config.read_text().replace("levels = 2", 'levels = "auto"')
+    config.write_text(text.replace("cam0.png", "@").replace("cam1.png", "cam0.png")
+                      .replace("@", "cam1.png"))
+    out = tmp_path / "out"
+    assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "georeg auto (multiscale) failed" in err and "invalid literal" not in err
+    assert not out.exists()
+
+
 def test_compare_measures_the_part_with_every_method(parts, tmp_path):
     """`georeg compare` on the panel's IGES: every method ok, every VTU with its `face`."""
     folder, _ = parts["panel"]
