@@ -270,12 +270,25 @@ def summary_dict(run) -> dict:
             "methods": methods}
 
 
+def seen_fraction(measurement, n_elements: int) -> np.ndarray:
+    """(n_elements,) share of each element's integration points (finest scale) inside the
+    residual's mask; 0 for an element without points."""
+    element = np.asarray(measurement.quadrature.element)
+    mask = np.asarray(measurement.residual.mask, bool)
+    total = np.bincount(element, minlength=n_elements)
+    seen = np.bincount(element, weights=mask.astype(float), minlength=n_elements)
+    return np.divide(seen, total, out=np.zeros(n_elements), where=total > 0)
+
+
 def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
     ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
     known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
-    ``shape_bias_mm`` (the bias indicator); for a part of several faces the cell data
-    ``face`` (each element's face index)."""
+    ``shape_bias_mm`` (the bias indicator); the cell data ``seen_fraction`` (the share of
+    each element's integration points at the finest scale that entered the residual: seen
+    by both cameras, not hidden, not grazing, not in the edge margin; 0 where the shape is
+    only carried by the regularization) and, for a part of several faces, ``face`` (each
+    element's face index)."""
     from fesdic_core.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
@@ -287,8 +300,10 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     for name in ("shape_std_mm", "shape_bias_mm"):
         if getattr(m, name, None) is not None:
             point_data[name] = np.asarray(getattr(m, name), float)
+    cell_data = {"seen_fraction": seen_fraction(m, mesh.n_elements)}
     face = getattr(result, "element_face", None)               # a part of several faces
-    cell_data = None if face is None else {"face": np.asarray(face, dtype=np.int32)}
+    if face is not None:
+        cell_data["face"] = np.asarray(face, dtype=np.int32)
     write_mesh(path, mesh, point_data=point_data, cell_data=cell_data)
     return Path(path)
 

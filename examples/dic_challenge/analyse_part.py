@@ -16,8 +16,12 @@ base plane (z = 0), and handed to the example's own comparison
 radii and crest heights, base flatness in the README's polygon). Printed beside the
 face-by-face run's ``summary.json`` (``--reference``), the laser's and pyvale's figures.
 
-What a VTU does not hold: which integration points a camera saw. The figures use every
-sampled point of the measured surface (hidden strips included, as the spline carries them).
+Which points a camera saw: ``georeg measure``'s VTU holds the cell data ``seen_fraction``
+(the share of each element's integration points that entered the residual). The figures use
+the elements at least :data:`SEEN` seen, as the face-by-face run uses its seen integration
+points: the strips a feature hides from one camera (next to the bars and the block) carry
+only the spline's continuation, not a measurement. ``run.py``'s VTUs do not hold it: there
+every sampled point is used.
 """
 from __future__ import annotations
 
@@ -45,6 +49,8 @@ from fesdic_core.mesh import CellBlock, map_points                       # noqa:
 
 #: sample points per element along each parent direction (cell centres of a k x k split)
 SAMPLES = 4
+#: an element counts as measured when at least this share of its points entered the residual
+SEEN = 0.5
 DEFAULT_CONFIG = HERE / "specimen_part.toml"
 
 
@@ -56,14 +62,14 @@ def sample_surface(points: np.ndarray, cells: np.ndarray, cell_type: str, k: int
     return map_points(points, block, xi).reshape(-1, 3)
 
 
-def _vtu_cells(mesh: meshio.Mesh) -> tuple[str, np.ndarray, np.ndarray | None]:
-    """The one surface cell block of a VTU, and its cell data ``face`` if any."""
+def _vtu_cells(mesh: meshio.Mesh, name: str = "face") -> tuple[str, np.ndarray, np.ndarray | None]:
+    """The one surface cell block of a VTU, and its cell data ``name`` if any."""
     blocks = [(k, c) for k, c in enumerate(mesh.cells) if c.type in ("quad9", "quad", "triangle", "triangle6")]
     if len(blocks) != 1:
         raise ValueError(f"expected one surface cell block, got {[c.type for c in mesh.cells]}")
     k, cells = blocks[0]
-    face = mesh.cell_data.get("face")
-    return cells.type, np.asarray(cells.data), None if face is None else np.asarray(face[k]).ravel()
+    data = mesh.cell_data.get(name)
+    return cells.type, np.asarray(cells.data), None if data is None else np.asarray(data[k]).ravel()
 
 
 def read_part(out_dir: Path, face_names: list[str], method: str = "georeg") -> tuple[dict, float | None]:
@@ -78,11 +84,13 @@ def read_part(out_dir: Path, face_names: list[str], method: str = "georeg") -> t
         raise ValueError(f"{out_dir / entries[0]['mesh_file']}: no cell data 'face'")
     if face.max() >= len(face_names):
         raise ValueError(f"face index {face.max()} but only {len(face_names)} face names {face_names}")
+    seen = _vtu_cells(mesh, "seen_fraction")[2]
+    measured = np.ones(len(cells), bool) if seen is None else seen >= SEEN
     points = {}
     for k, name in enumerate(face_names):
         if np.any(face == k):      # pieces of the plate ("base_*", interim IGES) join "base"
             key = "base" if name.startswith("base") else name
-            P = sample_surface(mesh.points, cells[face == k], cell_type)
+            P = sample_surface(mesh.points, cells[(face == k) & measured], cell_type)
             points[key] = np.concatenate([points[key], P]) if key in points else P
     return points, entries[0]["time_s"]
 

@@ -12,6 +12,8 @@ import meshio
 import numpy as np
 import pytest
 
+from fesdic_core.elements import family_from_meshio
+from fesdic_core.mesh import CellBlock, SurfaceMesh, boundary_nodes
 from georeg_app import cli
 from georeg_app.config import (CamerasConfig, Config, ConfigError, GeometryConfig, ImagesConfig,
                                MethodConfig, OutputConfig, load_config)
@@ -90,6 +92,15 @@ def test_measure_writes_the_faces_of_the_part(parts, tmp_path):
     vtu = meshio.read(next(out.glob("*.vtu")))
     face = np.concatenate(vtu.cell_data["face"])
     assert sorted(np.unique(face).tolist()) == [0, 1] and np.bincount(face).tolist() == [64, 64]
+    # seen_fraction: 1 inside; below 1 on the part's outline only (the 2 px edge margin); the
+    # crease is no boundary of the one mesh, so its elements keep every point
+    seen = np.concatenate(vtu.cell_data["seen_fraction"])
+    cells = np.concatenate([c.data for c in vtu.cells])
+    mesh = SurfaceMesh(vtu.points, (CellBlock(family_from_meshio("quad9"), cells),))
+    on_outline = np.isin(cells, boundary_nodes(mesh)).any(axis=1)
+    assert np.all((seen >= 0) & (seen <= 1))
+    np.testing.assert_array_equal(seen[~on_outline], 1.0)
+    assert 0.5 < seen[on_outline].mean() < 1.0, seen[on_outline]
     faces = read_part_json(next(out.glob("*_spline.json")))
     doc = json.loads(next(out.glob("*_spline.json")).read_text())
     assert [f["name"] for f in doc["faces"]] == ["left", "right"]

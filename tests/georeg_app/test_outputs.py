@@ -168,3 +168,11 @@ def test_published_folder_and_files_are_readable_by_others(tmp_path):
         os.umask(old)
     assert stat.S_IMODE(os.stat(tmp_path / "run").st_mode) == 0o755
     assert stat.S_IMODE(os.stat(tmp_path / "run" / "report.html").st_mode) == 0o644
+
+
+def test_seen_fraction_is_the_share_of_each_element_s_points_in_the_mask():
+    from types import SimpleNamespace
+    from georeg_app.outputs import seen_fraction
+    m = SimpleNamespace(quadrature=SimpleNamespace(element=np.array([0, 0, 1, 1, 1, 3])),
+                        residual=SimpleNamespace(mask=np.array([True, False, True, True, False, True])))
+    np.testing.assert_allclose(seen_fraction(m, 5), [0.5, 2 / 3, 0.0, 1.0, 0.0])
