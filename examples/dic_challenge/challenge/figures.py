@@ -27,16 +27,11 @@ def _png(fig: Figure) -> bytes:
     return buffer.getvalue()
 
 
-def binned(xy: np.ndarray, values: np.ndarray, cell_mm: float):
-    """Mean of ``values`` over square cells (NaN where empty) and the image extent."""
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    bins = np.maximum(1, np.ceil((hi - lo) / cell_mm).astype(int))
-    ranges = [[lo[0], lo[0] + bins[0] * cell_mm], [lo[1], lo[1] + bins[1] * cell_mm]]
-    total, _, _ = np.histogram2d(xy[:, 0], xy[:, 1], bins=bins, range=ranges, weights=values)
-    count, _, _ = np.histogram2d(xy[:, 0], xy[:, 1], bins=bins, range=ranges)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        grid = np.where(count > 0, total / count, np.nan)
-    return grid.T, (ranges[0][0], ranges[0][1], ranges[1][0], ranges[1][1])
+def _dots(ax, xy: np.ndarray, values: np.ndarray, size: float, **kwargs):
+    """The sampled points (4 x 4 per element) as square dots of ``size`` (points^2) coloured
+    by ``values``, rasterized."""
+    return ax.scatter(xy[:, 0], xy[:, 1], c=values, s=size, marker="s", linewidths=0, rasterized=True,
+                      **kwargs)
 
 
 def overview(points: dict) -> bytes:
@@ -45,9 +40,7 @@ def overview(points: dict) -> bytes:
     ax = fig.add_subplot(1, 1, 1)
     image = None
     for name, P in points.items():
-        grid, extent = binned(P[:, :2], P[:, 2], 0.4)
-        image = ax.imshow(grid, origin="lower", extent=extent, cmap="viridis", vmin=-0.05, vmax=6.5,
-                          interpolation="nearest")
+        image = _dots(ax, P[:, :2], P[:, 2], 6.0, cmap="viridis", vmin=-0.05, vmax=6.5)
         ax.text(P[:, 0].mean(), P[:, 1].mean(), name, ha="center", va="center", fontsize=8,
                 color="w" if name == "base" else "k")
     ax.set_xlim(-52, 52)
@@ -85,9 +78,7 @@ def shape_maps(points: dict, comparison, polygon=None) -> bytes:
         ax = fig.add_subplot(nrows, ncols, k + 1)
         xy, dev, label = _deviation(name, points[name], comparison)
         vmax = float(np.nanpercentile(np.abs(dev), 99)) or 1.0
-        grid, extent = binned(xy, dev, 0.25 if name == "base" else 0.12)
-        image = ax.imshow(grid, origin="lower", extent=extent, cmap="RdBu_r", vmin=-vmax, vmax=vmax,
-                          interpolation="nearest")
+        image = _dots(ax, xy, dev, 4.0, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
         if name == "base" and polygon is not None:
             ring = np.vstack([polygon, polygon[:1]])
             ax.plot(ring[:, 0], ring[:, 1], "k--", lw=1)
