@@ -9,7 +9,8 @@ install it in a separate venv and run this script with that venv's python::
     /work/venv-pyvale/bin/pip install pyvale
     PYTHONPATH=. /work/venv-pyvale/bin/python benchmarks/bench_vs_pyvale.py [--repeat 3]
 
-Without pyvale the script prints "skipped" and exits with status 0.
+Without pyvale the script prints "skipped" and exits with status 0 (but ``--real
+--shapes --steps``, ours only on the real pair, runs).
 
 Cases (synthetic, known truth, the same rendered pair for both codes):
 
@@ -28,12 +29,15 @@ core's ray caster (``--supersample`` rays per pixel side) or by riley-raster
 ``--real`` adds the real Stereo DIC Challenge 1.0 pair (``data/dic_challenge_stereo``, the
 PNGs cropped from the original frames, 1760 x 1664 px): pyvale with its own example's ROI
 polygon and seeds (``ex10_dic_chal``, shifted by the crop) and the calibration of the data
-(principal points shifted by the crop), against ``examples/dic_challenge`` (all four faces,
-six measurements, the fixed point of calibration and shape from the landmarks). No truth
+(principal points shifted by the crop), against ``examples/dic_challenge``: the specimen
+measured as one part from its CAD, ``georeg measure examples/dic_challenge/specimen_part.toml``
+(in process: ``georeg_app.pipeline.run_methods``; whole process: the command line), and
+its figures taken by ``analyse_part.py`` (the regions of ``analysis.toml``). No truth
 there: the figures are the flatness of the base plate in the data README's region (RMS to
 the best-fit plane and quadric, pyvale's points selected by their camera-0 subset centre in
 the README's quadrilateral, ours by the same region in mm) and of the block top (RMS to its
-plane; pyvale: the README's block-top quadrilateral, ours: the whole measured block top).
+plane; pyvale: the README's block-top quadrilateral, ours: analysis.toml's block top).
+``--real --shapes --steps`` (no shapes, no pyvale steps) runs ours only, without pyvale.
 
 What each code is given: the two 8-bit images; the EXACT cameras (pyvale: its calibration
 ``Calib`` with camera 1 placed by the exact stereo transform; ours: the JSON camera file of
@@ -366,12 +370,33 @@ def pyvale_faces_um(folder: Path) -> dict:
     return out
 
 
+def ours_real(out: Path):
+    """``georeg measure specimen_part.toml`` in process (``run_methods``, as the command line
+    runs it), its outputs written to ``out``, and the part's comparison by analyse_part.py;
+    returns (comparison, part, seconds of the measurement)."""
+    example = REPO / "examples" / "dic_challenge"
+    sys.path.insert(0, str(example))
+    import analyse_part
+    from challenge.comparison import compare
+    from georeg_app.config import load_config
+    from georeg_app.methods import measure_specs
+    from georeg_app.outputs import write_all
+    from georeg_app.pipeline import run_methods
+    config = load_config(example / "specimen_part.toml").with_output_dir(out)
+    t0 = time.perf_counter()
+    run = run_methods(config, measure_specs(config), progress=False)
+    seconds = time.perf_counter() - t0
+    write_all(out, run, overwrite=True)
+    part = analyse_part.load_part(out)
+    return compare(part), part, seconds
+
+
 def run_real(args, folder: Path) -> list[dict]:
-    """pyvale (steps of ``--steps``) and our example (examples/dic_challenge, all four faces)
-    on the real pair; flatness figures in the README's regions, points, times."""
-    sys.path.insert(0, str(REPO / "examples" / "dic_challenge"))
-    from challenge.pipeline import FACES, compare, run_challenge
-    arrays, calibration, roi, seeds = real_inputs(folder)
+    """pyvale (steps of ``--steps``) and our example (examples/dic_challenge: the part) on the
+    real pair; flatness figures in the README's regions, points, times."""
+    folder.mkdir(parents=True, exist_ok=True)
+    if args.steps:
+        arrays, calibration, roi, seeds = real_inputs(folder)
     keys = [f"pyvale {s}" for s in args.steps] + ["ours"]
     times, whole, figures = {k: [] for k in keys}, {k: [] for k in keys}, {}
     for r in range(args.repeat):
@@ -380,11 +405,9 @@ def run_real(args, folder: Path) -> list[dict]:
             _, seconds = pyvale_points(arrays, calibration, roi, seeds, step, args.threads, out)
             times[f"pyvale {step}"].append(seconds)
             figures[f"pyvale {step}"] = pyvale_faces_um(out)
-        t0 = time.perf_counter()
-        run = run_challenge(REPO / "examples" / "dic_challenge", FACES)
-        times["ours"].append(time.perf_counter() - t0)
-        c = compare(run)
-        figures["ours"] = {"points": sum(int(np.count_nonzero(v.seen)) for v in run.results.values()),
+        c, part, seconds = ours_real(folder / f"ours_inproc_{r}")
+        times["ours"].append(seconds)
+        figures["ours"] = {"points": sum(len(P) for P in part.points.values()),
                            "base": (1e3 * c.base_plane_rms_mm, 1e3 * c.base_quadric_rms_mm, None),
                            "block_top": (1e3 * c.block.top_rms_plane_mm, np.nan, c.block.n_top)}
         if args.whole:
@@ -392,15 +415,15 @@ def run_real(args, folder: Path) -> list[dict]:
                 whole[f"pyvale {step}"].append(whole_process(
                     [sys.executable, __file__, "--pyvale-worker", str(folder), "--steps", str(step),
                      "--threads", str(args.threads)], args.threads))
-            out = folder / f"ours_out_{r}"
             whole["ours"].append(whole_process(
-                [sys.executable, str(REPO / "examples" / "dic_challenge" / "run.py"), "--quiet",
-                 "--out", str(out)], args.threads))
+                [sys.executable, "-m", "georeg_app", "--quiet", "measure",
+                 str(REPO / "examples" / "dic_challenge" / "specimen_part.toml"),
+                 "--out", str(folder / f"ours_out_{r}"), "--overwrite"], args.threads))
     rows = []
     for key in keys:
         f = figures[key]
         label = f"pyvale, subset {SUBSET_PX} px, step {key.split()[1]}" if key.startswith("pyvale") \
-            else "ours (examples/dic_challenge, 4 faces, 6 measurements)"
+            else "ours (georeg measure specimen_part.toml, the part; points sampled 4 x 4 per element)"
         rows.append(dict(method=label, base_plane_um=f["base"][0], base_quadric_um=f["base"][1],
                          block_top_um=f["block_top"][0], points=f["points"],
                          inproc_s=statistics.median(times[key]),
@@ -506,14 +529,15 @@ def describe_machine(args) -> None:
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cpus, load average {os.getloadavg()[0]:.1f} at start; "
           f"{args.threads} threads per code")
-    print(f"python {platform.python_version()}, numpy {np.__version__}, pyvale {version('pyvale')}, "
+    pyvale = version("pyvale") if importlib.util.find_spec("pyvale") is not None else "not installed"
+    print(f"python {platform.python_version()}, numpy {np.__version__}, pyvale {pyvale}, "
           f"georeg {installed_version()} (code of {REPO}, commit {commit})")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                      epilog="Without pyvale installed the script prints 'skipped' "
-                                            "and exits 0.")
+                                            "and exits 0 (but --real --shapes --steps: ours only).")
     parser.add_argument("--repeat", type=int, default=3, help="interleaved timed runs (median)")
     parser.add_argument("--shapes", nargs="*", default=list(SHAPES), choices=list(SHAPES),
                         help="synthetic cases (none: only --real)")
@@ -543,8 +567,8 @@ def main(argv=None) -> int:
     if args.pyvale_worker is not None:
         pyvale_worker(args.pyvale_worker, args.steps[0], args.threads)
         return 0
-    if importlib.util.find_spec("pyvale") is None:
-        print(SKIP_MESSAGE.format(python=sys.executable))
+    if (args.steps or args.shapes) and importlib.util.find_spec("pyvale") is None:
+        print(SKIP_MESSAGE.format(python=sys.executable))      # (ours only: --real --shapes --steps)
         return 0
     import logging
     from fesdic_core.parallel import set_threads

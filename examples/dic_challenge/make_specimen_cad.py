@@ -6,8 +6,8 @@
 needs OpenCASCADE's Python binding (``cadquery-ocp``, the ``cad`` extra). The solid is the
 union of the base plate (a 101.6 mm square, top face at z = 0, centred at the origin: the
 world frame of ``specimen.toml``) and the raised features of ``specimen.toml`` (the block,
-both half-cylinders, both wedge prisms), with the block's height taken from the nominal of
-``block_top.toml`` (6.36 mm, the laser's). The file holds one open shell of the union's
+both half-cylinders, both wedge prisms), with the block's height taken from the block top of
+``analysis.toml`` (6.36 mm, the laser's). The file holds one open shell of the union's
 faces that the cameras can see, each named (STEP ``ADVANCED_FACE`` names through XCAF):
 
 ========================  ========================================================
@@ -23,8 +23,8 @@ faces that the cameras can see, each named (STEP ``ADVANCED_FACE`` names through
 in this order (16 faces). The bars' end caps and the plate's sides and bottom are left out.
 The faces share their edges (they come from one solid), so a reader can weld them. The file
 is read back and each face's area checked against the hand formula (:func:`expected_areas`).
-``--interim-iges`` also writes the faces of the face-by-face run as untrimmed IGES B-splines
-for today's ``georeg measure`` (see "interim IGES" below).
+``--interim-iges`` also writes the analysis regions of ``analysis.toml`` as untrimmed IGES
+B-splines for a ``georeg measure`` without the ``cad`` extra (see "interim IGES" below).
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from challenge.config import Feature, load_face, load_specimen                # noqa: E402
+from challenge.config import Feature, load_analysis                           # noqa: E402
 
 logger = logging.getLogger("make_specimen_cad")
 
@@ -51,7 +51,7 @@ FACE_NAMES = ("base", "block_top", "block_wall_xm", "block_wall_xp", "block_wall
               "cylinder_h", "cylinder_v", "prism_h_ym", "prism_h_yp", "prism_v_xm", "prism_v_xp",
               "cylinder_h_flank_a", "cylinder_h_flank_b", "cylinder_v_flank_a", "cylinder_v_flank_b")
 #: each bar's curved face is split along its length: a crest face of +-CREST_DEG about the
-#: top (the arc both cameras see, as cylinder_*.toml) and two flank faces down to the plate
+#: top (the arc both cameras see, as analysis.toml's [[bars]]) and two flank faces down to the plate
 CREST_DEG = 40.0
 DEFAULT_OUT = HERE.parent.parent / "data" / "dic_challenge_stereo" / "specimen.step"
 
@@ -105,15 +105,16 @@ def feature_solid(f: Feature, block_height_mm: float):
     return _prism(np.array([ridge, *feet]), axis)
 
 
-def specimen_solid(specimen_toml: Path, block_top_toml: Path):
-    """The union of the plate and the features, coplanar pieces merged; and the features."""
+def specimen_solid(analysis_toml: Path):
+    """The union of the plate and the features of the specimen that ``analysis_toml`` names
+    (the block as high as its block top), coplanar pieces merged; and the features."""
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
     from OCP.ShapeUpgrade import ShapeUpgrade_UnifySameDomain
     from OCP.collections import List_TopoDS_Shape as TopTools_ListOfShape
-    specimen = load_specimen(specimen_toml)
-    top = load_face(block_top_toml).nominals[0]
-    height = float(np.mean(np.asarray(top.corners_mm)[:, 2]))
+    config = load_analysis(analysis_toml)
+    specimen = config.specimen
+    height = float(np.mean(np.asarray(config.block_top_mm)[:, 2]))
     h = PLATE_MM / 2
     plate = BRepPrimAPI_MakeBox(_pnt([-h, -h, -BELOW_MM]), _pnt([h, h, 0.0])).Shape()
     args, tools = TopTools_ListOfShape(), TopTools_ListOfShape()
@@ -347,15 +348,15 @@ def expected_areas(features, height: float) -> dict:
 # --------------------------------------------------------------------------- interim IGES
 # Until the `cad` extra reads STEP and trimmed faces, `georeg measure` reads untrimmed
 # B-spline surfaces (IGES entity 128) only. This writes, through OpenCASCADE's IGES
-# translator, the faces the face-by-face run measures as such surfaces: the block top
-# (inset, block_top.toml), the bars' arcs about their crests (cylinder_*.toml), the prisms'
+# translator, the analysis regions as such surfaces: the block top (inset, analysis.toml's
+# [block_top]), the bars' arcs about their crests (its [[bars]]), the prisms'
 # four slanted faces (rectangles in the CAD: untrimmed already), and in place
 # of the trimmed plate three rectangles of it free of features (INTERIM_BASE_MM): one that
 # holds the README's flatness region and the east side of the block's ring, and one strip
 # beside each bar that holds its ring (the plate 1.5..6 mm from its footprint).
 
 #: x and y ranges (mm) of the plate's stand-ins: ``base`` from 1.5 mm east of the block and
-#: 1.1 mm south of the vertical prism's end to the face-by-face nominal's edges (base.toml);
+#: 1.1 mm south of the vertical prism's end to the plate region's edges (analysis.toml [base]);
 #: ``base_h`` between the horizontal prism and bar, ``base_v`` between the vertical prism
 #: and bar (each at least 1.5 mm from a footprint)
 INTERIM_BASE_MM = {"base": ((-10.0, 49.0), (-49.0, 1.0)), "base_h": ((-47.0, -4.0), (23.0, 31.5)),
@@ -378,26 +379,28 @@ def _biquadratic(face):
 
 
 def interim_surfaces(folder: Path = HERE) -> dict:
-    """Name -> untrimmed biquadratic B-spline surface of the faces of the face-by-face run."""
+    """Name -> untrimmed biquadratic B-spline surface of the analysis regions of
+    ``folder/analysis.toml`` (the plate's stand-ins, the block top, the bars' arcs, the prisms)."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
     from OCP.gp import gp_Ax3, gp_Cylinder, gp_Dir, gp_Pln
     up, x = gp_Dir(0.0, 0.0, 1.0), gp_Dir(1.0, 0.0, 0.0)
     out = {name: _biquadratic(BRepBuilderAPI_MakeFace(gp_Pln(gp_Ax3(_pnt([0, 0, 0]), up, x)),
                                                        x0, x1, y0, y1).Face())
            for name, ((x0, x1), (y0, y1)) in INTERIM_BASE_MM.items()}
-    top = np.asarray(load_face(folder / "block_top.toml").nominals[0].corners_mm, float)
+    config = load_analysis(folder / "analysis.toml")
+    top = np.asarray(config.block_top_mm, float)
     lo, hi = top.min(axis=0), top.max(axis=0)
     out["block_top"] = _biquadratic(BRepBuilderAPI_MakeFace(
         gp_Pln(gp_Ax3(_pnt([0, 0, top[0, 2]]), up, x)), lo[0], hi[0], lo[1], hi[1]).Face())
-    for name in ("cylinder_h", "cylinder_v"):
-        n = next(n for n in load_face(folder / f"{name}.toml").nominals if n.kind == "cylinder")
-        line = np.asarray(n.line_mm, float)
+    for n in config.bars:
+        name = n.name
+        line = np.asarray(n.axis_mm, float)
         axis = line[1] - line[0]
         frame = gp_Ax3(_pnt(line[0]), gp_Dir(*axis), up)          # u = 0 at the crest
         half = np.radians(n.arc_deg / 2)
         out[name] = _biquadratic(BRepBuilderAPI_MakeFace(gp_Cylinder(frame, float(n.radius_mm)), -half, half,
                                                          0.0, float(np.linalg.norm(axis))).Face())
-    shape, features, height = specimen_solid(folder / "specimen.toml", folder / "block_top.toml")
+    shape, features, height = specimen_solid(folder / "analysis.toml")
     for name, face in name_faces(shape, features, height).items():
         if name.startswith("prism"):                    # untrimmed rectangles already
             out[name] = _biquadratic(face)
@@ -455,7 +458,7 @@ def bar_faces(f: Feature) -> dict:
 def build(out: Path = DEFAULT_OUT) -> dict:
     """Build the union, name its visible faces (the bars split into crest and flanks), write
     ``out``; the named faces."""
-    shape, features, height = specimen_solid(HERE / "specimen.toml", HERE / "block_top.toml")
+    shape, features, height = specimen_solid(HERE / "analysis.toml")
     named = name_faces(shape, features, height)
     for f in features:
         if f.kind == "half_cylinder":
@@ -469,7 +472,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="STEP file to write")
     p.add_argument("--interim-iges", type=Path, default=None,
-                   help="also write the face-by-face run's faces as untrimmed IGES B-splines "
+                   help="also write the analysis regions as untrimmed IGES B-splines "
                         "(entity 128) to this file, for georeg measure before the cad extra")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
@@ -487,7 +490,7 @@ def main(argv=None) -> int:
         logger.info("wrote %s: %s", args.interim_iges, ", ".join(surfaces))
     logger.info("wrote %s: %d faces, %.1f kB", args.out, len(faces), args.out.stat().st_size / 1e3)
     back = read_step_faces(args.out)
-    _, features, height = specimen_solid(HERE / "specimen.toml", HERE / "block_top.toml")
+    _, features, height = specimen_solid(HERE / "analysis.toml")
     expected = expected_areas(features, height)
     for name in FACE_NAMES:
         area = face_area(back[name]) if name in back else float("nan")

@@ -1,8 +1,8 @@
 """Pick the landmarks and the nominal geometry of the Stereo DIC Challenge specimen, once.
 
-This is the one-time preparation of ``specimen.toml`` and of the face configurations;
-``run.py`` never calls it. It prints TOML snippets; the values stored in the
-configurations are these, rounded (0.01 mm for landmarks, 0.1 mm for the geometry).
+This is the one-time preparation of ``specimen.toml``, ``analysis.toml`` and the landmarks
+of ``specimen_part.toml``; nothing else calls it. It prints TOML snippets; the values stored
+in the configurations are these, rounded (0.01 mm for landmarks, 0.1 mm for the geometry).
 
 1. Sparse stereo by normalised cross-correlation (NCC) along epipolar lines: a 41 px
    template around a point of camera 0 is compared with camera 1 at points of the
@@ -18,7 +18,7 @@ configurations are these, rounded (0.01 mm for landmarks, 0.1 mm for the geometr
 4. Heights above the base plane, on a 4 px grid over each feature (NCC of a 13 px
    template along the camera-0 ray, heights -1..8 mm by 0.05 mm): outline of the block
    top, cylinder axes (robust circle fit of the cross-sections), prism ridges and
-   footprints. These place the nominal patches and the occluders; they are not results.
+   footprints. These place the CAD's features and the analysis regions; they are not results.
 5. Landmarks: speckle points at chosen world positions (plate near its corners, block
    top, cylinder crests) matched in both views and triangulated: their world
    coordinates and pixels in both (cropped) images.

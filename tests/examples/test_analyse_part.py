@@ -1,9 +1,9 @@
 """examples/dic_challenge/analyse_part.py on exact shapes of known dimensions.
 
-A "measured" specimen is written as Q9 VTUs, once as one part (cell data ``face``, the
-output layout of ``georeg measure``) and once face by face (``run.py``'s layout), tilted
-and shifted off the base plane by a rigid motion: the figures must come back as the
-dimensions the shapes were made with (block height, radii, crest heights, a flat plate).
+A "measured" specimen is written as one Q9 VTU with cell data ``face`` (the output layout of
+``georeg measure``), tilted and shifted off the base plane by a rigid motion: the figures
+must come back as the dimensions the shapes were made with (block height, radii, crest
+heights, a flat plate, the prisms' angle). ``--out`` writes the report's files, all or none.
 """
 import json
 import sys
@@ -16,7 +16,7 @@ HERE = Path(__file__).resolve().parents[2] / "examples" / "dic_challenge"
 sys.path.insert(0, str(HERE))
 
 import analyse_part                                                  # noqa: E402
-from challenge.config import load_face                              # noqa: E402
+from challenge.config import ConfigError, load_analysis             # noqa: E402
 from fesdic_core.mesh import SurfaceMesh, rectangle_mesh            # noqa: E402
 from fesdic_core.mesh_io import write_mesh                          # noqa: E402
 
@@ -31,15 +31,17 @@ def _grid(u, v, nu, nv):
     return m
 
 
+ANALYSIS = load_analysis(HERE / "analysis.toml")
+
+
 def exact_faces() -> dict:
     """name -> Q9 mesh of the exact face (world frame: plate z = 0)."""
     faces = {"base": _grid((-49.0, 49.0), (-49.0, 49.0), 40, 40)}
-    top = np.asarray(load_face(HERE / "block_top.toml").nominals[0].corners_mm)
+    top = np.asarray(ANALYSIS.block_top_mm)
     m = _grid((top[:, 0].min(), top[:, 0].max()), (top[:, 1].min(), top[:, 1].max()), 8, 8)
     faces["block_top"] = m.with_nodes(m.nodes + [0.0, 0.0, HEIGHT_MM])
     for name, r in RADII_MM.items():
-        n = next(n for n in load_face(HERE / f"{name}.toml").nominals if n.kind == "cylinder")
-        line = np.asarray(n.line_mm, float)
+        line = np.asarray(next(b for b in ANALYSIS.bars if b.name == name).axis_mm, float)
         axis = line[1] - line[0]
         length = np.linalg.norm(axis)
         axis /= length
@@ -50,8 +52,7 @@ def exact_faces() -> dict:
         start = np.r_[line[0, :2], AXIS_Z_MM]
         X = start + s[:, None] * axis + r * (np.sin(a)[:, None] * lateral + np.cos(a)[:, None] * [0, 0, 1.0])
         faces[name] = m.with_nodes(X)
-    specimen = load_face(HERE / "base.toml").specimen
-    for f in (f for f in specimen.features if f.kind == "wedge"):      # the nominal prisms
+    for f in (f for f in ANALYSIS.specimen.features if f.kind == "wedge"):      # the nominal prisms
         line = np.asarray(f.line_mm, float)
         axis = line[1] - line[0]
         lateral = np.cross(axis, [0.0, 0.0, 1.0])
@@ -117,18 +118,53 @@ def test_part_vtu_gives_the_exact_dimensions(tmp_path, capsys):
     assert "block height above the plate ring" in capsys.readouterr().out
 
 
-def test_face_by_face_vtus_give_the_same(tmp_path):
-    for name, m in exact_faces().items():
-        write_mesh(tmp_path / f"{name}.vtu", m.with_nodes(_moved(m.nodes)))
-    out = tmp_path / "figures.json"
-    assert analyse_part.main([str(tmp_path), "--json", str(out)]) == 0
-    _check(json.loads(out.read_text()))
+def test_report_folder_holds_the_figures_and_the_targets(tmp_path, capsys):
+    """--out: summary.json (the same figures as --json), the PNGs and report.html; the targets
+    printed. The exact block is 6.30 mm high: 0.06 mm off the laser's 6.36 mm, a FAIL."""
+    config = write_part(tmp_path, exact_faces())
+    report = tmp_path / "report"
+    assert analyse_part.main([str(tmp_path), "--config", str(config), "--out", str(report)]) == 0
+    names = sorted(p.name for p in report.iterdir())
+    assert names == ["cylinder_profiles.png", "overview.png", "report.html", "shape_maps.png", "summary.json"]
+    summary = json.loads((report / "summary.json").read_text())
+    _check(summary)
+    targets = {t["claim"]: t["passed"] for t in summary["targets"]}
+    assert targets["block height within 0.03 mm of 6.36 mm"] is False
+    assert targets["base plate: RMS to the best-fit quadric < 3.6 um (pyvale)"] is True
+    assert targets["the part measured in < 300 s"] is None           # not the specimen's images
+    out = capsys.readouterr().out
+    assert "FAIL  block height within 0.03 mm of 6.36 mm: 6.3000 mm" in out
+    page = (report / "report.html").read_text()
+    assert page.count("data:image/png;base64,") == 3 and "6.3000" in page
+
+
+def test_bad_analysis_config_is_one_line_naming_file_and_key(tmp_path, capsys):
+    config = write_part(tmp_path, exact_faces())
+    text = (HERE / "analysis.toml").read_text().replace('specimen = "specimen.toml"',
+                                                       f'specimen = "{HERE / "specimen.toml"}"')
+    bad = tmp_path / "analysis.toml"
+    for broken, words in ((text.replace("arc_deg = 80.0", "arc_deg = 80.0\narc_dgr = 2", 1),
+                           r"analysis.toml: \[\[bars\]\]\[0\] arc_dgr: unknown key \(did you mean arc_deg"),
+                          (text.replace('name = "cylinder_h"', 'name = "cylinder_x"'),
+                           r"analysis.toml: \[\[bars\]\]\[0\] name: no \[\[features\]\] named 'cylinder_x'"),
+                          (text.replace('ring_feature = "block"', "ring_feature = 3"),
+                           r"analysis.toml: \[base\] ring_feature"),
+                          (text.replace("[block_top]", "[block_tops]"), r"analysis.toml: .*block_top")):
+        bad.write_text(broken)
+        with pytest.raises(ConfigError, match=words):
+            load_analysis(bad)
+        assert analyse_part.main([str(tmp_path), "--config", str(config), "--analysis", str(bad),
+                                  "--out", str(tmp_path / "report")]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("analyse_part.py: error: ") and "analysis.toml" in err[0], err
+        assert not (tmp_path / "report").exists()
 
 
 def test_missing_face_data_is_an_error_naming_the_file(tmp_path, capsys):
     config = write_part(tmp_path, exact_faces())
     m = exact_faces()["block_top"]
     write_mesh(tmp_path / "georeg.vtu", m)                       # no cell data `face`
-    assert analyse_part.main([str(tmp_path), "--config", str(config)]) == 1
-    err = capsys.readouterr().err
-    assert "georeg.vtu" in err and "face" in err
+    assert analyse_part.main([str(tmp_path), "--config", str(config), "--out", str(tmp_path / "report")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "georeg.vtu" in err[0] and "face" in err[0], err
+    assert not (tmp_path / "report").exists()

@@ -18,11 +18,12 @@ HERE = ROOT / "examples" / "dic_challenge"
 sys.path.insert(0, str(HERE))
 
 import make_specimen_cad as cad                                      # noqa: E402
-from challenge.config import load_face, load_specimen                # noqa: E402
+from challenge.config import load_analysis                          # noqa: E402
 
 STEP = ROOT / "data" / "dic_challenge_stereo" / "specimen.step"
-SPECIMEN = load_specimen(HERE / "specimen.toml")
-HEIGHT = float(np.mean(load_face(HERE / "block_top.toml").nominals[0].corners_mm[:, 2]))
+ANALYSIS = load_analysis(HERE / "analysis.toml")
+SPECIMEN = ANALYSIS.specimen
+HEIGHT = float(np.mean(ANALYSIS.block_top_mm[:, 2]))
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """Fuzzing the configuration readers: a malformed file is always one ConfigError naming it.
 
 Each example starts from a valid document (georeg's config, with JSON cameras or with a
-pyvale calibration and landmarks; the Stereo DIC Challenge example's face and specimen
+pyvale calibration and landmarks; the Stereo DIC Challenge example's analysis and specimen
 files), breaks it one to three times (a wrong type, a non-finite number, a negative size,
 an empty list, nested garbage, a missing required key, an unknown key, a table replaced
 by garbage; every break on its own makes the file invalid, and a later break never
@@ -115,17 +115,12 @@ BAD = {
     "corners2": _bad_array(4, 2),
     "segment": _bad_array(2, 3),
     "polygon": st.one_of(_not_a_number, st.lists(_bad_vector(2), min_size=1, max_size=4)),
-    "levels": st.one_of(_not_an_integer, st.integers(-2 ** 63, 0),
-                        st.integers(challenge_config.MAX_LEVELS + 1, 2 ** 63 - 1)),
-    "scales": st.one_of(_not_a_number, st.just([]), st.lists(st.integers(-2 ** 63, -1), min_size=1),
-                        st.just([0, 1]), st.lists(_not_an_integer, min_size=1, max_size=3)),
     "names": st.one_of(_not_a_number.filter(lambda v: not isinstance(v, list)),
                        st.lists(_not_a_string, min_size=1, max_size=3),
                        st.lists(_text.filter(lambda s: s != "block"), min_size=1, max_size=3)),
     "feature": st.one_of(_not_a_string, _text.filter(lambda s: s != "block")),
     **{f"enum:{','.join(c)}": _not_one_of(c) for c in (GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS,
-                                                       challenge_config.FEATURE_KINDS,
-                                                       challenge_config.NOMINAL_KINDS)},
+                                                       challenge_config.FEATURE_KINDS)},
 }
 
 
@@ -317,60 +312,52 @@ SPECIMEN = Schema(
      ("features", 0): {"name", "kind", "footprint_mm", "height_mm", "line_mm", "half_width_mm",
                        "radius_mm"}})
 
-_NOMINAL = {"name": "top", "kind": "quadrilateral", "elements": [8, 8], "spline_elements": [1, 1],
-            "levels": 3, "corners_mm": [[0.0, 0.0, 6.0], [9.0, 0.0, 6.0], [9.0, 9.0, 6.0],
-                                        [0.0, 9.0, 6.0]], "holes": [], "hole_margin_mm": 1.0}
-_FACE_METHOD = {"scales": [2, 1, 0], "max_fixed_point": 6, "max_iter": 20, "points_per_px": 1.0,
-                "visibility_margin_mm": 0.5}
-_ANALYSIS = {"flatness_polygon_mm": [[0.0, 0.0], [9.0, 0.0], [9.0, 9.0]], "ring_feature": "block",
-             "ring_mm": [1.5, 6.0], "edge_margin_mm": 0.0}
-FACE = Schema(
-    {"face": {"name": "top", "specimen": "specimen.toml", "occluders": ["block"]},
-     "nominal": [_NOMINAL], "method": _FACE_METHOD, "analysis": _ANALYSIS},
-    {("face", "name"): "string", ("face", "specimen"): "path", ("face", "occluders"): "names",
-     ("nominal", 0, "name"): "string",
-     ("nominal", 0, "kind"): _enum(challenge_config.NOMINAL_KINDS),
-     ("nominal", 0, "elements"): "count_pair", ("nominal", 0, "spline_elements"): "count_pair",
-     ("nominal", 0, "levels"): "levels", ("nominal", 0, "corners_mm"): "corners3",
-     ("nominal", 0, "axis_mm"): "segment", ("nominal", 0, "radius_mm"): "positive",
-     ("nominal", 0, "arc_deg"): "positive", ("nominal", 0, "holes"): "names",
-     ("nominal", 0, "hole_margin_mm"): "number",
-     ("method", "scales"): "scales", ("method", "max_fixed_point"): "count",
-     ("method", "max_iter"): "count", ("method", "points_per_px"): "positive",
-     ("method", "visibility_margin_mm"): "number",
-     ("analysis", "flatness_polygon_mm"): "polygon", ("analysis", "ring_feature"): "feature",
-     ("analysis", "ring_mm"): "number_pair", ("analysis", "edge_margin_mm"): "number"},
-    [("face",), ("face", "name"), ("face", "specimen"), ("nominal",), ("nominal", 0, "name"),
-     ("nominal", 0, "kind"), ("nominal", 0, "elements"), ("nominal", 0, "corners_mm")],
-    {(): {"face", "nominal", "method", "analysis"}, ("face",): {"name", "specimen", "occluders"},
-     ("nominal", 0): set(_NOMINAL) | {"axis_mm", "radius_mm", "arc_deg"},
-     ("method",): set(_FACE_METHOD), ("analysis",): set(_ANALYSIS)})
+_BAR = {"name": "block", "axis_mm": [[0.0, 4.0, -0.2], [9.0, 4.0, -0.2]], "radius_mm": 6.0,
+        "arc_deg": 80.0}
+_BASE = {"corners_mm": [[0.0, 0.0, 0.0], [9.0, 0.0, 0.0], [9.0, 9.0, 0.0], [0.0, 9.0, 0.0]],
+         "holes": ["block"], "hole_margin_mm": 1.0,
+         "flatness_polygon_mm": [[0.0, 0.0], [9.0, 0.0], [9.0, 9.0]], "ring_feature": "block",
+         "ring_mm": [1.5, 6.0]}
+ANALYSIS = Schema(
+    {"specimen": "specimen.toml", "base": _BASE,
+     "block_top": {"corners_mm": [[1.0, 1.0, 6.0], [8.0, 1.0, 6.0], [8.0, 8.0, 6.0], [1.0, 8.0, 6.0]]},
+     "bars": [_BAR]},
+    {("specimen",): "path", ("base", "corners_mm"): "corners3", ("base", "holes"): "names",
+     ("base", "hole_margin_mm"): "number", ("base", "flatness_polygon_mm"): "polygon",
+     ("base", "ring_feature"): "feature", ("base", "ring_mm"): "number_pair",
+     ("block_top", "corners_mm"): "corners3",
+     ("bars", 0, "name"): "feature", ("bars", 0, "axis_mm"): "segment",
+     ("bars", 0, "radius_mm"): "positive", ("bars", 0, "arc_deg"): "positive"},
+    [("specimen",), ("base",), ("base", "corners_mm"), ("block_top",), ("block_top", "corners_mm"),
+     ("bars", 0, "name"), ("bars", 0, "axis_mm"), ("bars", 0, "radius_mm"), ("bars", 0, "arc_deg")],
+    {(): {"specimen", "base", "block_top", "bars"}, ("base",): set(_BASE), ("block_top",): {"corners_mm"},
+     ("bars", 0): set(_BAR)})
 
 
-def _example_folder(tmp_path: Path, face: dict, specimen: dict) -> Path:
+def _example_folder(tmp_path: Path, analysis: dict, specimen: dict) -> Path:
     for name in ("cam0.png", "cam1.png", "calib.csv"):
         (tmp_path / name).write_bytes(b"x")
     (tmp_path / "specimen.toml").write_text(_toml(specimen))
-    (tmp_path / "face.toml").write_text(_toml(face))
-    return tmp_path / "face.toml"
+    (tmp_path / "analysis.toml").write_text(_toml(analysis))
+    return tmp_path / "analysis.toml"
 
 
 def test_the_valid_example_documents_load(tmp_path):
-    face = challenge_config.load_face(_example_folder(tmp_path, FACE.doc, SPECIMEN.doc))
-    assert face.nominals[0].elements == (8, 8) and face.specimen.feature("block").height_mm == 6.0
+    analysis = challenge_config.load_analysis(_example_folder(tmp_path, ANALYSIS.doc, SPECIMEN.doc))
+    assert analysis.bars[0].radius_mm == 6.0 and analysis.specimen.feature("block").height_mm == 6.0
     assert challenge_config.ConfigError is ConfigError          # one validation machinery
 
 
 @FUZZ
-@given(doc=broken(FACE))
-def test_broken_example_face_file_is_one_config_error(tmp_path, doc):
+@given(doc=broken(ANALYSIS))
+def test_broken_example_analysis_file_is_one_config_error(tmp_path, doc):
     path = _example_folder(tmp_path, doc, SPECIMEN.doc)
-    _assert_one_config_error(challenge_config.load_face, path, tmp_path)
+    _assert_one_config_error(challenge_config.load_analysis, path, tmp_path)
 
 
 @FUZZ
 @given(doc=broken(SPECIMEN))
 def test_broken_example_specimen_file_is_one_config_error(tmp_path, doc):
-    path = _example_folder(tmp_path, FACE.doc, doc)
-    _assert_one_config_error(lambda p: challenge_config.load_face(p.parent / "face.toml"),
+    path = _example_folder(tmp_path, ANALYSIS.doc, doc)
+    _assert_one_config_error(lambda p: challenge_config.load_analysis(p.parent / "analysis.toml"),
                              path.parent / "specimen.toml", tmp_path)

@@ -1,2 +1,3 @@
-"""The Stereo DIC Challenge example: configuration, nominal faces, visibility, measurement,
-figures of merit and report (used by ``run.py``; see README "Real images")."""
+"""The Stereo DIC Challenge example: configuration (specimen, analysis regions), figures of
+merit, comparison with the laser and pyvale, figures and report (used by ``analyse_part.py``;
+see README "Real images")."""

@@ -6,9 +6,7 @@
   base plate around the block (``ring_mm`` from its footprint);
 * cylinders: least-squares cylinder (axis direction and position, radius) by
   Gauss-Newton (``scipy.optimize.least_squares``); crest height = height of the axis
-  above the base plane + radius; the radius over sub-arcs about the crest;
-* flat vs cylindrical nominal: distance between the two measured surfaces of a bar,
-  along the normal, over their common part.
+  above the base plane + radius; the radius over sub-arcs about the crest.
 """
 from __future__ import annotations
 
@@ -16,7 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from matplotlib.path import Path as Polygon
-from scipy.interpolate import LinearNDInterpolator
 from scipy.optimize import least_squares
 
 from .config import Feature
@@ -151,25 +148,3 @@ def radius_by_arc(points: np.ndarray, fit: CylinderFit, half_angles=(20.0, 30.0,
             sub = fit_cylinder(points[keep], fit.axis_direction, fit.radius_mm)
             out.append((a, sub.radius_mm, int(keep.sum())))
     return out
-
-
-def surface_distance(points: np.ndarray, reference: np.ndarray, axis: np.ndarray,
-                     border_mm: float = 0.5, step_mm: float = 0.05) -> np.ndarray:
-    """Normal distance (n,) from ``points`` to the surface sampled by ``reference`` (m, 3).
-
-    Both are seen as heights over the plane spanned by ``axis`` and the lateral direction;
-    the reference height is interpolated linearly (Delaunay) at the points, and the height
-    difference is multiplied by the cosine of the local lateral slope (central difference
-    over ``step_mm``). NaN outside the reference and within ``border_mm`` of its lateral edges.
-    """
-    a = unit(np.asarray(axis, float))
-    lateral = unit(np.cross(a, [0.0, 0.0, 1.0]))
-    frame = np.array([a, lateral, np.cross(lateral, a)])
-    P, Q = points @ frame.T, reference @ frame.T
-    interp = LinearNDInterpolator(Q[:, :2], Q[:, 2])
-    offsets = np.array([[0.0, 0.0], [0.0, step_mm], [0.0, -step_mm]])
-    h0, hp, hm = interp((P[None, :, :2] + offsets[:, None]).reshape(-1, 2)).reshape(3, -1)
-    lo, hi = Q[:, 1].min(), Q[:, 1].max()
-    h0[(P[:, 1] < lo + border_mm) | (P[:, 1] > hi - border_mm)] = np.nan
-    slope = (hp - hm) / (2 * step_mm)
-    return (P[:, 2] - h0) / np.sqrt(1.0 + slope ** 2)

@@ -1,10 +1,11 @@
-"""The configuration of the Stereo DIC Challenge example: the specimen and one file per face.
+"""The configuration of the Stereo DIC Challenge example: the specimen and its analysis.
 
-``specimen.toml`` holds what the faces share: the stereo pair, the pyvale calibration, the
-landmarks that place the specimen (world frame: mm, base plane z = 0) and the raised
-features (the solids that hide parts of the base from a camera). Each face file
-(``base.toml``, ``block_top.toml``, ``cylinder_h.toml``, ``cylinder_v.toml``) names its
-nominal surface(s), the features that may hide it, the method and the analysis region.
+``specimen.toml`` holds what the specimen is: the stereo pair, the pyvale calibration, the
+landmarks that place it (world frame: mm, base plane z = 0; picked by pick_landmarks.py)
+and the raised features' dimensions (make_specimen_cad.py builds the CAD from them).
+``analysis.toml`` names the specimen file and holds where analyse_part.py takes the figures:
+the base plate's region and flatness polygon, the ring around a feature that heights are
+measured from, the block top's region, each bar's axis, arc and length.
 Relative paths are resolved against the folder of the file. Unknown keys, wrong types and
 missing keys are errors that name the file, the table and the key (:class:`ConfigError`).
 """
@@ -16,17 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from georeg_app.toml_schema import (ConfigError, Table, array, count, existing_file, integer,
-                                    load_toml, number, one_of, pair, positive, string, strings,
-                                    table, table_list)
+from georeg_app.toml_schema import (ConfigError, Table, array, existing_file, load_toml, number,
+                                    one_of, pair, positive, string, strings, table, table_list)
 
-__all__ = ["ConfigError", "MAX_LEVELS", "Landmark", "Feature", "Specimen", "Nominal", "Method",
-           "Analysis", "Face", "load_specimen", "load_face"]
+__all__ = ["ConfigError", "Landmark", "Feature", "Specimen", "Plate", "Bar", "Analysis",
+           "load_specimen", "load_analysis"]
 
 FEATURE_KINDS = ("box", "wedge", "half_cylinder")
-NOMINAL_KINDS = ("quadrilateral", "cylinder")
-#: spline levels of a nominal at most (each one doubles the spline elements)
-MAX_LEVELS = 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,66 +71,48 @@ class Specimen:
 
 
 @dataclass(frozen=True, eq=False)
-class Nominal:
-    """One nominal surface of a face: a quadrilateral (4 corners) or a cylinder (axis, radius).
+class Plate:
+    """Where the base plate's figures are taken: inside ``corners_mm`` (4, 3), off the
+    footprints of the ``holes`` features by more than ``hole_margin_mm``; flatness in
+    ``flatness_polygon_mm`` (m, 2); heights above the plate ``ring_mm`` (2,) from a footprint
+    (the block's, ``ring_feature``, and each bar's)."""
 
-    ``elements`` are the FE elements (Q9) along (u, v); ``spline_elements`` the elements of
-    the coarsest spline level; ``levels`` the number of spline levels (each one refines the
-    previous one dyadically). ``holes`` are features cut out of the FE mesh.
-    """
+    corners_mm: np.ndarray
+    holes: tuple[str, ...]
+    hole_margin_mm: float
+    flatness_polygon_mm: np.ndarray | None
+    ring_feature: str | None
+    ring_mm: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class Bar:
+    """Where a bar's figures are taken: ``arc_deg`` about the crest of the axis segment
+    ``axis_mm`` (2, 3), over its length; ``radius_mm`` starts the cylinder fit. ``name`` is
+    both a measured face and one of the specimen's [[features]] (its footprint: the ring)."""
 
     name: str
-    kind: str
-    elements: tuple[int, int]
-    spline_elements: tuple[int, int]
-    levels: int
-    corners_mm: np.ndarray | None = None
-    line_mm: np.ndarray | None = None
-    radius_mm: float | None = None
-    arc_deg: float | None = None
-    holes: tuple[str, ...] = ()
-    hole_margin_mm: float = 1.0
-
-
-@dataclass(frozen=True)
-class Method:
-    scales: tuple[int, ...] = (3, 2, 1, 0)
-    max_fixed_point: int = 6
-    max_iter: int = 20
-    points_per_px: float = 1.0
-    visibility_margin_mm: float = 0.5
+    axis_mm: np.ndarray
+    radius_mm: float
+    arc_deg: float
 
 
 @dataclass(frozen=True, eq=False)
 class Analysis:
-    """Where the figures of merit are taken (world frame, mm)."""
+    """The analysis configuration (``analysis.toml``): world frame, mm, base plane z = 0.
 
-    flatness_polygon_mm: np.ndarray | None = None
-    ring_feature: str | None = None
-    ring_mm: tuple[float, float] = (1.5, 6.0)
-    edge_margin_mm: float = 0.0
+    ``block_top_mm`` (4, 3): the block top's region (inset from its edges; z the nominal
+    height, which make_specimen_cad.py gives the CAD's block)."""
 
-
-@dataclass(frozen=True)
-class Face:
     source: Path
-    name: str
     specimen: Specimen
-    occluders: tuple[str, ...]
-    nominals: tuple[Nominal, ...]
-    method: Method
-    analysis: Analysis
+    plate: Plate
+    block_top_mm: np.ndarray
+    bars: tuple[Bar, ...]
 
 
 # --------------------------------------------------------------------------- reading
 # (the generic machinery, one table at a time, is georeg_app.toml_schema's)
-
-def _scales(v: Any) -> tuple[int, ...]:
-    """A non-empty list of integers >= 0."""
-    if not isinstance(v, list) or not v or any(integer(x) < 0 for x in v):
-        raise TypeError
-    return tuple(v)
-
 
 def _file(table: Table, key: str, base: Path) -> Path:
     """The required existing file ``key`` (relative to ``base``), resolved."""
@@ -199,74 +178,39 @@ def load_specimen(path: str | Path) -> Specimen:
     return Specimen(source, cam0, cam1, csv, tuple(landmarks), features)
 
 
-def _nominal(item: Any, i: int, source: Path, specimen: Specimen) -> Nominal:
-    t = Table(item, f"[[nominal]][{i}]", source)
-    name = t.take("name", string, "a string", required=True)
-    kind = t.take("kind", one_of(NOMINAL_KINDS), f"one of {', '.join(NOMINAL_KINDS)}",
-                  required=True)
-    nominal = Nominal(
-        name=name, kind=kind,
-        elements=t.take("elements", pair(count), "2 integers >= 1", required=True),
-        spline_elements=t.take("spline_elements", pair(count), "2 integers >= 1", default=(1, 1)),
-        levels=t.take("levels", count, "an integer >= 1", default=3),
-        corners_mm=t.take("corners_mm", array((4, 3)), "4 corners [x, y, z] (mm)"),
-        line_mm=t.take("axis_mm", array((2, 3)), "2 points [x, y, z] (mm)"),
-        radius_mm=t.take("radius_mm", positive, "a number > 0 (mm)"),
-        arc_deg=t.take("arc_deg", positive, "a number > 0 (degrees)"),
-        holes=t.take("holes", strings, "a list of feature names", default=()),
-        hole_margin_mm=t.take("hole_margin_mm", number, "a number (mm)", default=1.0))
+def _bar(item: Any, i: int, source: Path, specimen: Specimen) -> Bar:
+    t = Table(item, f"[[bars]][{i}]", source)
+    bar = Bar(name=_feature_name(t, "name", t.take("name", string, "a string", required=True), specimen),
+              axis_mm=t.take("axis_mm", array((2, 3)), "2 points [x, y, z] (mm)", required=True),
+              radius_mm=t.take("radius_mm", positive, "a number > 0 (mm)", required=True),
+              arc_deg=t.take("arc_deg", positive, "a number > 0 (degrees)", required=True))
     t.finish()
-    needs = {"quadrilateral": ("corners_mm",), "cylinder": ("line_mm", "radius_mm", "arc_deg")}[kind]
-    for key in needs:
-        if getattr(nominal, key) is None:
-            raise t.error(key.replace("line_mm", "axis_mm"), f"missing required key (kind = {kind!r})")
-    for hole in nominal.holes:
-        _feature_name(t, "holes", hole, specimen)
-    if nominal.levels > MAX_LEVELS:
-        raise t.error("levels", f"must be <= {MAX_LEVELS} (each level doubles the spline "
-                                f"elements), got {nominal.levels}")
-    fine = [s * 2 ** (nominal.levels - 1) for s in nominal.spline_elements]
-    if any(e % f for e, f in zip(nominal.elements, fine)):
-        raise t.error("elements", f"{list(nominal.elements)} must be multiples of the finest "
-                                  f"spline level's {fine} (spline_elements x 2^(levels - 1))")
-    return nominal
+    return bar
 
 
-def load_face(path: str | Path) -> Face:
-    """Read a face file and the specimen file it names."""
+def load_analysis(path: str | Path) -> Analysis:
+    """Read the analysis file and the specimen file it names."""
     source = Path(path).resolve()
     top = Table(load_toml(source), "", source)
-    face = Table(top.take("face", table, "a table", required=True), "[face]", source)
-    name = face.take("name", string, "a string", required=True)
-    specimen = load_specimen(_file(face, "specimen", source.parent))
-    occluders = face.take("occluders", strings, "a list of feature names", default=())
-    face.finish()
-    for o in occluders:
-        _feature_name(face, "occluders", o, specimen)
-    nominals = tuple(_nominal(item, i, source, specimen) for i, item in enumerate(
-        top.take("nominal", table_list, "[[nominal]]", required=True)))
-    m = Table(top.take("method", table, "a table", default={}), "[method]", source)
-    d = Method()
-    method = Method(
-        scales=m.take("scales", _scales, "a list of integers >= 0", default=d.scales),
-        max_fixed_point=m.take("max_fixed_point", count, "an integer >= 1",
-                               default=d.max_fixed_point),
-        max_iter=m.take("max_iter", count, "an integer >= 1", default=d.max_iter),
-        points_per_px=m.take("points_per_px", positive, "a number > 0", default=d.points_per_px),
-        visibility_margin_mm=m.take("visibility_margin_mm", number, "a number (mm)",
-                                    default=d.visibility_margin_mm))
-    m.finish()
-    if list(method.scales) != sorted(set(method.scales), reverse=True):
-        raise m.error("scales", f"must decrease (coarse to fine), got {list(method.scales)}")
-    a = Table(top.take("analysis", table, "a table", default={}), "[analysis]", source)
-    analysis = Analysis(
-        flatness_polygon_mm=a.take("flatness_polygon_mm", lambda v: array((len(v), 2))(v),
+    specimen = load_specimen(_file(top, "specimen", source.parent))
+    b = Table(top.take("base", table, "a table", required=True), "[base]", source)
+    plate = Plate(
+        corners_mm=b.take("corners_mm", array((4, 3)), "4 corners [x, y, z] (mm)", required=True),
+        holes=b.take("holes", strings, "a list of feature names", default=()),
+        hole_margin_mm=b.take("hole_margin_mm", number, "a number (mm)", default=1.0),
+        flatness_polygon_mm=b.take("flatness_polygon_mm", lambda v: array((len(v), 2))(v),
                                    "a list of [x, y] (mm)"),
-        ring_feature=a.take("ring_feature", string, "a feature name"),
-        ring_mm=a.take("ring_mm", pair(number), "2 numbers (mm)", default=(1.5, 6.0)),
-        edge_margin_mm=a.take("edge_margin_mm", number, "a number (mm)", default=0.0))
-    a.finish()
-    if analysis.ring_feature is not None:
-        _feature_name(a, "ring_feature", analysis.ring_feature, specimen)
+        ring_feature=b.take("ring_feature", string, "a feature name"),
+        ring_mm=b.take("ring_mm", pair(number), "2 numbers (mm)", default=(1.5, 6.0)))
+    b.finish()
+    for name in plate.holes:
+        _feature_name(b, "holes", name, specimen)
+    if plate.ring_feature is not None:
+        _feature_name(b, "ring_feature", plate.ring_feature, specimen)
+    t = Table(top.take("block_top", table, "a table", required=True), "[block_top]", source)
+    block_top = t.take("corners_mm", array((4, 3)), "4 corners [x, y, z] (mm)", required=True)
+    t.finish()
+    bars = tuple(_bar(item, i, source, specimen) for i, item in enumerate(
+        top.take("bars", table_list, "[[bars]]", default=[])))
     top.finish()
-    return Face(source, name, specimen, occluders, nominals, method, analysis)
+    return Analysis(source, specimen, plate, block_top, bars)

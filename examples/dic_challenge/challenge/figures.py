@@ -1,10 +1,11 @@
-"""Figures of the Stereo DIC Challenge run (PNG bytes, matplotlib Agg, no display).
+"""Figures of the Stereo DIC Challenge part (PNG bytes, matplotlib Agg, no display).
+
+The gray-level residual maps are ``georeg measure``'s own (``residual_maps.png`` in its
+output folder): its VTU holds no per-point residual to redraw them from.
 
 - :func:`overview`: height of every measured face above the base plane (mm);
 - :func:`shape_maps`: deviation of each face from its best-fit plane (base plate, block
   top) or cylinder (bars), micrometres;
-- :func:`residual_maps`: gray-level residual at the integration points (% of the dynamic
-  range of the images), per face;
 - :func:`cylinder_profiles`: radial residual against the angle from the crest for the
   best-fit radius and for the laser's and pyvale's radii imposed.
 """
@@ -26,30 +27,20 @@ def _png(fig: Figure) -> bytes:
     return buffer.getvalue()
 
 
-def binned(xy: np.ndarray, values: np.ndarray, cell_mm: float):
-    """Mean of ``values`` over square cells (NaN where empty) and the image extent."""
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    bins = np.maximum(1, np.ceil((hi - lo) / cell_mm).astype(int))
-    ranges = [[lo[0], lo[0] + bins[0] * cell_mm], [lo[1], lo[1] + bins[1] * cell_mm]]
-    total, _, _ = np.histogram2d(xy[:, 0], xy[:, 1], bins=bins, range=ranges, weights=values)
-    count, _, _ = np.histogram2d(xy[:, 0], xy[:, 1], bins=bins, range=ranges)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        grid = np.where(count > 0, total / count, np.nan)
-    return grid.T, (ranges[0][0], ranges[0][1], ranges[1][0], ranges[1][1])
+def _dots(ax, xy: np.ndarray, values: np.ndarray, size: float, **kwargs):
+    """The sampled points (4 x 4 per element) as square dots of ``size`` (points^2) coloured
+    by ``values``, rasterized."""
+    return ax.scatter(xy[:, 0], xy[:, 1], c=values, s=size, marker="s", linewidths=0, rasterized=True,
+                      **kwargs)
 
 
-def overview(results) -> bytes:
-    """All measured faces coloured by their height above the base plane (mm)."""
+def overview(points: dict) -> bytes:
+    """All measured faces (points by face name) coloured by their height above the base plane (mm)."""
     fig = Figure(figsize=(8.5, 7.5))
     ax = fig.add_subplot(1, 1, 1)
     image = None
-    for name, r in results.items():
-        if name.endswith("_flat"):
-            continue
-        P = r.points_mm[r.seen]
-        grid, extent = binned(P[:, :2], P[:, 2], 0.4)
-        image = ax.imshow(grid, origin="lower", extent=extent, cmap="viridis", vmin=-0.05, vmax=6.5,
-                          interpolation="nearest")
+    for name, P in points.items():
+        image = _dots(ax, P[:, :2], P[:, 2], 6.0, cmap="viridis", vmin=-0.05, vmax=6.5)
         ax.text(P[:, 0].mean(), P[:, 1].mean(), name, ha="center", va="center", fontsize=8,
                 color="w" if name == "base" else "k")
     ax.set_xlim(-52, 52)
@@ -63,12 +54,11 @@ def overview(results) -> bytes:
     return _png(fig)
 
 
-def _deviation(name, result, comparison) -> tuple[np.ndarray, np.ndarray, str]:
-    """(x, y) of the seen points, their deviation (um) from the face's fit, and a label."""
-    P = result.points_mm[result.seen]
-    cyl = comparison.cylinders.get(name.removesuffix("_flat"))
+def _deviation(name, P, comparison) -> tuple[np.ndarray, np.ndarray, str]:
+    """(x, y) of the points, their deviation (um) from the face's fit, and a label."""
+    cyl = comparison.cylinders.get(name)
     if cyl is not None:
-        fit = cyl.fit_flat if name.endswith("_flat") else cyl.fit
+        fit = cyl.fit
         arm = P - fit.axis_point_mm
         radial = arm - np.outer(arm @ fit.axis_direction, fit.axis_direction)
         dev = np.linalg.norm(radial, axis=1) - fit.radius_mm
@@ -78,19 +68,17 @@ def _deviation(name, result, comparison) -> tuple[np.ndarray, np.ndarray, str]:
     return P[:, :2], 1e3 * analysis.plane_residuals(P), "distance to the best-fit plane"
 
 
-def shape_maps(results, comparison, polygon=None) -> bytes:
+def shape_maps(points: dict, comparison, polygon=None) -> bytes:
     """Deviation (um) of each face from its best-fit plane or cylinder."""
-    names = [n for n in results]
+    names = [n for n in points]
     ncols = 3
     nrows = int(np.ceil(len(names) / ncols))
     fig = Figure(figsize=(5.2 * ncols, 4.6 * nrows))
     for k, name in enumerate(names):
         ax = fig.add_subplot(nrows, ncols, k + 1)
-        xy, dev, label = _deviation(name, results[name], comparison)
+        xy, dev, label = _deviation(name, points[name], comparison)
         vmax = float(np.nanpercentile(np.abs(dev), 99)) or 1.0
-        grid, extent = binned(xy, dev, 0.25 if name == "base" else 0.12)
-        image = ax.imshow(grid, origin="lower", extent=extent, cmap="RdBu_r", vmin=-vmax, vmax=vmax,
-                          interpolation="nearest")
+        image = _dots(ax, xy, dev, 4.0, cmap="RdBu_r", vmin=-vmax, vmax=vmax)
         if name == "base" and polygon is not None:
             ring = np.vstack([polygon, polygon[:1]])
             ax.plot(ring[:, 0], ring[:, 1], "k--", lw=1)
@@ -99,28 +87,6 @@ def shape_maps(results, comparison, polygon=None) -> bytes:
         ax.set_xlabel("x (mm)", fontsize=8)
         fig.colorbar(image, ax=ax, shrink=0.8, label="um")
     fig.suptitle("Shape: deviation from the best-fit plane or cylinder (um)")
-    return _png(fig)
-
-
-def residual_maps(results) -> bytes:
-    """Gray-level residual (% of the dynamic range) at the integration points, per face."""
-    names = list(results)
-    ncols = 3
-    nrows = int(np.ceil(len(names) / ncols))
-    fig = Figure(figsize=(5.2 * ncols, 4.6 * nrows))
-    for k, name in enumerate(names):
-        r = results[name]
-        ax = fig.add_subplot(nrows, ncols, k + 1)
-        P = r.points_mm[r.seen]
-        grid, extent = binned(P[:, :2], r.residual_percent[r.seen], 0.25 if name == "base" else 0.12)
-        image = ax.imshow(grid, origin="lower", extent=extent, cmap="RdBu_r", vmin=-5, vmax=5,
-                          interpolation="nearest")
-        ax.set_aspect("equal")
-        ax.set_title(f"{name}: std {r.measurement.residual_percent:.2f}% "
-                     f"({100 * np.mean(~r.seen):.1f}% of points masked)", fontsize=8)
-        ax.set_xlabel("x (mm)", fontsize=8)
-        fig.colorbar(image, ax=ax, shrink=0.8, label="%")
-    fig.suptitle("Gray-level residual (% of the image dynamic range), cells of 0.12-0.25 mm")
     return _png(fig)
 
 
@@ -145,8 +111,6 @@ def cylinder_profiles(comparison) -> bytes | None:
     for k, (name, c) in enumerate(cyl.items()):
         ax = fig.add_subplot(1, len(cyl), k + 1)
         fits = {f"best fit r = {c.fit.radius_mm:.3f} mm": c.fit, **{f"r = {lab}": f for lab, f in c.fixed.items()}}
-        if c.fit_flat is not None:
-            fits[f"flat nominal, best fit r = {c.fit_flat.radius_mm:.3f} mm"] = c.fit_flat
         for label, fit in fits.items():
             x, y = _profile(fit)
             ax.plot(x, y, ".-", label=f"{label} (RMS {1e3 * fit.rms_mm:.1f} um)")
