@@ -209,7 +209,9 @@ def table(this: dict, reference: dict | None) -> str:
         lines += [f"| {name}: RMS of its faces to their planes (um), {' / '.join(prism['rms_plane_um'])} "
                   f"| {rms} | | | |",
                   f"| {name}: included angle (deg; nominal {prism['nominal_angle_deg']:.2f}) "
-                  f"| {prism['included_angle_deg']:.3f} | | | |"]
+                  f"| {prism['included_angle_deg']:.3f} | | {report.LASER['prism_angle_deg']} | |",
+                  f"| {name}: ridge above the base plane (mm) | {prism['ridge_height_mm']:.4f} | | "
+                  f"{report.LASER['ridge_mm']} | |"]
     return "\n".join(lines)
 
 

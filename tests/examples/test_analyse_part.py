@@ -108,6 +108,8 @@ def _check(figures):
         assert prism["included_angle_deg"] == pytest.approx(prism["nominal_angle_deg"], abs=1e-6)
         assert prism["nominal_angle_deg"] == pytest.approx(2 * np.degrees(np.arctan(6.4 / 6.9)), abs=1e-9)
         assert max(prism["rms_plane_um"].values()) < 1e-3
+        ridge = ANALYSIS.specimen.feature(name).line_mm[0][2]          # 6.9 mm, the ridge line's z
+        assert prism["ridge_height_mm"] == pytest.approx(ridge, abs=1e-5)
 
 
 def test_part_vtu_gives_the_exact_dimensions(tmp_path, capsys):

@@ -158,10 +158,21 @@ def _ring(base: np.ndarray, feature: Feature, ring_mm) -> np.ndarray:
     return base[(d >= ring_mm[0]) & (d <= ring_mm[1])]
 
 
+def ridge_height(frames, near: np.ndarray) -> float:
+    """Height (z, mm) of the line where two planes ``(centre, axes)`` meet, at its point
+    nearest ``near``: ``x = near + a n1 + b n2`` on both planes."""
+    (c1, a1), (c2, a2) = frames
+    n1, n2 = a1[2], a2[2]
+    G = np.array([[n1 @ n1, n1 @ n2], [n2 @ n1, n2 @ n2]])
+    a, b = np.linalg.solve(G, [n1 @ (c1 - near), n2 @ (c2 - near)])
+    return float((near + a * n1 + b * n2)[2])
+
+
 def prism_figures(part: MeasuredPart) -> dict:
     """Per prism measured on both slanted faces, in the band ``PRISM_BAND`` of heights: each
-    face's RMS to its best-fit plane (um), the included angle between the two planes and
-    their slopes (deg), beside the nominal angle."""
+    face's RMS to its best-fit plane (um), the included angle between the two planes, their
+    slopes (deg) and the height of the ridge where the two planes meet (mm, base plane
+    z = 0), beside the nominal angle."""
     out = {}
     for f in (f for f in part.analysis.specimen.features if f.kind == "wedge"):
         sides = sorted(k for k in part.points if k.startswith(f.name + "_"))
@@ -169,8 +180,10 @@ def prism_figures(part: MeasuredPart) -> dict:
             continue
         lo, hi = np.array(PRISM_BAND) * f.line_mm[0][2]
         P = [p[(p[:, 2] >= lo) & (p[:, 2] <= hi)] for p in (part.points[k] for k in sides)]
-        n = [analysis.plane_frame(p)[1][2] for p in P]
+        frames = [analysis.plane_frame(p) for p in P]
+        n = [axes[2] for _, axes in frames]
         out[f.name] = {"rms_plane_um": {k: 1e3 * analysis.rms(analysis.plane_residuals(p)) for k, p in zip(sides, P)},
+                       "ridge_height_mm": ridge_height(frames, np.concatenate(P).mean(axis=0)),
                        "included_angle_deg": 180.0 - float(np.degrees(np.arccos(np.clip(n[0] @ n[1], -1, 1)))),
                        "slope_deg": {k: float(np.degrees(np.arccos(v[2]))) for k, v in zip(sides, n)},
                        "nominal_angle_deg": float(2 * np.degrees(np.arctan2(f.half_width_mm, f.line_mm[0][2])))}

@@ -17,7 +17,8 @@ from georeg_app.report import STYLESHEET
 from .comparison import Comparison, MeasuredPart
 
 LASER = {"block_height_mm": 6.36, "radius_mm": {"cylinder_v": 6.38, "cylinder_h": 6.62},
-         "axis_depth_mm": "0.13-0.37", "crest_mm": "about 6.2-6.4"}
+         "axis_depth_mm": "0.13-0.37", "crest_mm": "about 6.2-6.4",
+         "prism_angle_deg": "about 90 (faces at about 45)", "ridge_mm": "about 6.8-6.9"}
 PYVALE = {"base_plane_um": 7.9, "base_quadric_um": 3.6, "block_top_um": "4.2-4.4",
           "block_height_mm": 6.333, "radius_mm": {"cylinder_v": 6.157, "cylinder_h": 6.178},
           "crest_mm": "6.21-6.22", "cylinder_rms_um": 5.0,
@@ -83,7 +84,9 @@ def comparison_rows(part: MeasuredPart, c: Comparison) -> list[list[str]]:
         rows += [[f"{name}: RMS of its faces to their planes (um), {' / '.join(prism['rms_plane_um'])}",
                   rms, "", ""],
                  [f"{name}: included angle (deg; nominal {prism['nominal_angle_deg']:.2f})",
-                  _f(prism["included_angle_deg"], 3), "", ""]]
+                  _f(prism["included_angle_deg"], 3), LASER["prism_angle_deg"], ""],
+                 [f"{name}: ridge (the faces' planes meet) above the base plane (mm)",
+                  _f(prism["ridge_height_mm"], 4), LASER["ridge_mm"], ""]]
     rows += [["gray-level residual std (% of the dynamic range)", _f(part.residual_percent, 2), "", ""],
              ["sampled points / elements left out as not seen",
               ", ".join(f"{k} {c.n_points[k]:,} / {100 * part.masked_fraction.get(k, math.nan):.1f}%"
