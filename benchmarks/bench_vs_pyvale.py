@@ -355,6 +355,7 @@ def pyvale_faces_um(folder: Path) -> dict:
     over the README base region, to the plane over the README block top (subset centres in
     the quadrilaterals), and the points delivered."""
     from pyvale import dic
+    sys.path.insert(0, str(REPO / "examples" / "dic_challenge"))
     from challenge import analysis
     res = dic.import_3d(data=str(folder / "dic_results_*"), delimiter=",", binary=True,
                         layout="column", print_level=0)

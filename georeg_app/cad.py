@@ -35,6 +35,7 @@ import numpy as np
 
 from adapters.fesdic_core import NominalModel, nominal_model, part_model
 from georeg_plugin.iges import read_iges_surfaces
+from georeg_plugin.conforming import conforming_faces
 from georeg_plugin.multipatch import NonConformingFacesError
 from georeg_plugin.trimmed import grid_triangles
 
@@ -133,9 +134,15 @@ def cad_face_indices(path: Path, faces: Sequence | None, every: Sequence[CadFace
 
 def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
     """The selected faces of a CAD file, with their trimming loops (``faces``: see
-    :func:`cad_face_indices`)."""
+    :func:`cad_face_indices`), the faces that meet along an edge given the same knots there
+    (:func:`~georeg_plugin.conforming.conforming_faces`: the same surfaces, the loops stay
+    valid)."""
     every = read_cad_faces(path)
-    return tuple(every[k] for k in cad_face_indices(path, faces, every))
+    chosen = [every[k] for k in cad_face_indices(path, faces, every)]
+    if len(chosen) > 1:
+        patches = conforming_faces([f.patch for f in chosen], [f.name for f in chosen])
+        chosen = [dataclasses.replace(f, patch=g) for f, g in zip(chosen, patches)]
+    return tuple(chosen)
 
 
 def cad_occluders(path: Path, faces: Sequence | None) -> np.ndarray | None:

@@ -7,7 +7,9 @@ a patch"):
   bicubic CAD face, gets its nodes on the surface at the same parametric Q9 positions and
   Eq. 16 then holds only approximately: the operators only need ``R_J(xi_I)`` at the nodes);
 * the meshes are welded where faces share an edge: conforming when the edge nodes of both
-  faces coincide, else :class:`NonConformingFacesError` names the two faces; a trimmed face
+  faces coincide (faces that split the edge differently are first given the same knots
+  there, :func:`~georeg_plugin.conforming.conforming_faces`), else
+  :class:`NonConformingFacesError` names the two faces; a trimmed face
   (:mod:`georeg_plugin.trimmed`) keeps its elements inside its loops, a staircase: the faces
   meeting it along its trimming curve are not welded there (a gap of up to one element);
 * each level moves the control points of every face by vectors (:mod:`georeg_plugin.curved`),

@@ -270,3 +270,27 @@ def test_the_faces_not_measured_are_the_occluders():
     heights = np.unique(np.round(t[..., 2], 6))
     assert heights.size == 2 and np.isclose(np.ptp(heights), 20.0)
     assert cad_occluders(DATA / "cylinder.step", None) is None
+
+
+def test_box_with_fillet_is_one_part_welded_everywhere_but_along_the_trimmed_arcs():
+    """Its faces split their shared edges differently (the 20 mm side against the 17 mm face
+    beside the fillet, ...): the common refinement (georeg_plugin.conforming) gives them the
+    same knots, the surfaces unchanged, and the 7 faces mesh as one part (before: refused,
+    NonConformingFacesError). The mesh's free edges are only where the trimmed end faces meet
+    the fillet along their trimming arc (a staircase, not welded), within two elements of it."""
+    from georeg_plugin.patch import invert_points
+    from fesdic_core.mesh import boundary_nodes
+    read = read_cad_faces(DATA / "box_fillet.step")
+    part = cad_part(DATA / "box_fillet.step")
+    for f, g in zip(read, part):
+        uv = _grid(f.patch, 7)
+        np.testing.assert_allclose(g.patch.evaluate(uv), f.patch.evaluate(uv), atol=1e-12)
+    assert sum(g.patch.n_dofs > f.patch.n_dofs for f, g in zip(read, part)) >= 2
+    model = cad_model(DATA / "box_fillet.step", None, 500, 2)
+    mesh = model.mesh
+    assert sorted(set(model.element_face.tolist())) == list(range(7))
+    free = boundary_nodes(mesh)
+    fillet = next(g.patch for g in part if g.patch.is_rational)
+    _, distance = invert_points(fillet, mesh.nodes[free])
+    h = max(np.ptp(mesh.nodes[c], axis=0).max() for c in mesh.blocks[0].connectivity[:50])
+    assert free.size > 0 and distance.max() < 2 * h, (distance.max(), h)

@@ -1,0 +1,147 @@
+"""Faces that meet along an edge made to share their knots there (knot insertion, Eq. 13).
+
+Two CAD faces that meet along an edge rarely split it alike: a box's side face runs the
+whole length of the box while the face beside it stops where a fillet begins; a CAD writer
+gives each face its own knot spans. Meshed one element per knot span (Eq. 17) and refined
+alike, their edge nodes then do not coincide (:class:`~georeg_plugin.multipatch.NonConformingFacesError`)
+and their control points are not glued.
+
+The coupling used here is the common refinement: every knot of one face's edge (and every
+end of that edge) that lies inside the other face's edge is inserted into the other face, in
+the direction along that edge, the ends with the full multiplicity ``p`` (the edge curve
+splits there into separate pieces, one per neighbour) and the knots of the edge with their own
+multiplicity. Knot insertion leaves each surface exactly as it was (Eq. 15); afterwards the
+shared stretch of edge has the same knots on both faces, so a common dyadic refinement keeps
+it so, the FE nodes along it coincide and so do the control points wherever the two faces
+parameterize the edge alike (affinely: the straight edges of planes, cylinders, cones, and
+arcs written with the same weights), which :func:`~georeg_plugin.curved.vector_gluing` then
+glues into one vector. Where the two parameterizations differ more than affinely the edge's
+knots still match but its mid-span nodes do not, and the part's mesh refuses the pair, naming
+it, as before.
+
+Only a face's own boundary (the edges of its parameter box) is matched: a face whose edge
+lies inside another face (a feature standing on a trimmed plate) meets that face along its
+trimming loop, where the mesh of the trimmed face ends in a staircase and is not welded
+(:mod:`georeg_plugin.trimmed`).
+"""
+from __future__ import annotations
+
+import logging
+from typing import Sequence
+
+import numpy as np
+
+from .patch import SplinePatch, invert_points
+from .refine import insert_knots
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["conforming_faces"]
+
+#: passes of the common refinement at most (a knot inserted into one face can reach a third
+#: face through that face's opposite edge)
+MAX_PASSES = 20
+
+
+def _edge_knots(patch: SplinePatch) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per edge of the parameter box: ``(uv, multiplicity)`` of its breakpoints, ends
+    included (multiplicity ``p`` at the ends: where the edge stops, a neighbour's must split)."""
+    out = []
+    for d in (0, 1):                                   # the direction along the edge
+        knots, p = patch.knots[d], patch.degrees[d]
+        values, counts = np.unique(knots, return_counts=True)
+        counts = np.minimum(counts, p)
+        lo, hi = patch.knots[1 - d][0], patch.knots[1 - d][-1]
+        for fixed in (lo, hi):
+            uv = np.empty((values.size, 2))
+            uv[:, d], uv[:, 1 - d] = values, fixed
+            out.append((uv, counts))
+    return out
+
+
+def _missing(knots: np.ndarray, value: float, multiplicity: int, tol: float) -> int:
+    """How many times ``value`` must be inserted to reach ``multiplicity`` (0 at the ends)."""
+    if value <= knots[0] + tol or value >= knots[-1] - tol:
+        return 0
+    have = int(np.count_nonzero(np.abs(knots - value) <= tol))
+    return max(0, multiplicity - have)
+
+
+def _snap(knots: np.ndarray, value: float, tol: float) -> float:
+    """``value``, or the knot it lies within ``tol`` of (so that repeated knots are equal)."""
+    near = np.abs(knots - value) <= tol
+    return float(knots[near][0]) if near.any() else float(value)
+
+
+def _insertions(target: SplinePatch, points: np.ndarray, multiplicity: np.ndarray,
+                distance_tol: float, param_rtol: float) -> tuple[list, list]:
+    """Knots to insert into ``target`` (per direction) for the ``points`` lying on the
+    boundary of its parameter box (not at its corners)."""
+    uv, distance = invert_points(target, points)
+    new = ([], [])
+    lo = np.array([target.knots[0][0], target.knots[1][0]])
+    hi = np.array([target.knots[0][-1], target.knots[1][-1]])
+    tol = param_rtol * (hi - lo)
+    for (u, v), dist, m in zip(uv, distance, multiplicity):
+        if dist > distance_tol:
+            continue
+        on = [min(abs(x - lo[d]), abs(x - hi[d])) <= tol[d] for d, x in enumerate((u, v))]
+        if on[0] == on[1]:                             # inside the face, or at a corner
+            continue
+        d = 1 if on[0] else 0                          # on a u-edge the edge runs along v
+        x = _snap(target.knots[d], (u, v)[d], tol[d])
+        already = new[d].count(x)
+        count = _missing(target.knots[d], x, int(m), tol[d]) - already
+        new[d].extend([x] * max(count, 0))
+    return new
+
+
+def conforming_faces(faces: Sequence[SplinePatch], names: Sequence[str] | None = None,
+                     rtol: float = 1e-7, param_rtol: float = 1e-6) -> list[SplinePatch]:
+    """The faces with knots inserted so that faces meeting along an edge split it alike.
+
+    Parameters
+    ----------
+    faces : the part's faces (each surface stays the same, Eq. 15). The edges of a trimmed
+        face's parameter box count as any face's (it can meet its neighbours along them);
+        its trimming loops, in (u, v), stay valid.
+    names : for the log.
+    rtol : a point lies on a face when closer than ``rtol`` times the part's size.
+    param_rtol : a parameter is on the box's boundary (or on a knot) within this fraction
+        of the parameter range.
+
+    Returns
+    -------
+    list of SplinePatch : the same surfaces; every stretch of edge two faces share has the
+    same breakpoints on both.
+    """
+    faces = list(faces)
+    names = list(names) if names is not None else [f"face {k}" for k in range(len(faces))]
+    size = float(np.ptp(np.vstack([f.control_points.reshape(-1, 3) for f in faces]), axis=0).max())
+    distance_tol = rtol * (size or 1.0)
+    for _ in range(MAX_PASSES):
+        changed = False
+        for b, source in enumerate(faces):
+            edges = _edge_knots(source)
+            points = np.vstack([source.evaluate(uv) for uv, _ in edges])
+            counts = np.concatenate([m for _, m in edges])
+            for a, target in enumerate(faces):
+                if a == b:
+                    continue
+                box = target.control_points.reshape(-1, 3)      # convex hull: quick rejection
+                near = np.all((points >= box.min(0) - distance_tol)
+                              & (points <= box.max(0) + distance_tol), axis=1)
+                if not near.any():
+                    continue
+                new_u, new_v = _insertions(target, points[near], counts[near], distance_tol,
+                                           param_rtol)
+                if new_u or new_v:
+                    faces[a] = insert_knots(target, sorted(new_u), sorted(new_v))[0]
+                    logger.info("%s: knots %s (u), %s (v) inserted where %s's edge meets it",
+                                names[a], np.round(sorted(new_u), 6).tolist(),
+                                np.round(sorted(new_v), 6).tolist(), names[b])
+                    changed = True
+        if not changed:
+            return faces
+    raise RuntimeError(f"conforming_faces: the common refinement did not settle in "
+                       f"{MAX_PASSES} passes")
