@@ -7,8 +7,10 @@ alike, their edge nodes then do not coincide (:class:`~georeg_plugin.multipatch.
 and their control points are not glued.
 
 The coupling used here is the common refinement: every knot of one face's edge (and every
-end of that edge) that lies inside the other face's edge is inserted into the other face, in
-the direction along that edge, the ends with the full multiplicity ``p`` (the edge curve
+end of that edge) that lies inside the other face's edge, with a span of the edge next to it
+running along the other's edge too (a shared stretch; a point where two edges merely touch,
+such as a rim circle tangent to a square plate's edge, adds nothing), is inserted into the
+other face, in the direction along that edge, the ends with the full multiplicity ``p`` (the edge curve
 splits there into separate pieces, one per neighbour) and the knots of the edge with their own
 multiplicity. Knot insertion leaves each surface exactly as it was (Eq. 15); afterwards the
 shared stretch of edge has the same knots on both faces, so a common dyadic refinement keeps
@@ -43,19 +45,22 @@ __all__ = ["conforming_faces"]
 MAX_PASSES = 20
 
 
-def _edge_knots(patch: SplinePatch) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per edge of the parameter box: ``(uv, multiplicity)`` of its breakpoints, ends
-    included (multiplicity ``p`` at the ends: where the edge stops, a neighbour's must split)."""
+def _edges(patch: SplinePatch) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per edge of the parameter box: ``(uv, multiplicity, mid)``: its breakpoints, ends
+    included (multiplicity ``p`` at the ends: where the edge stops, a neighbour's must split),
+    and the midpoints of its spans."""
     out = []
     for d in (0, 1):                                   # the direction along the edge
         knots, p = patch.knots[d], patch.degrees[d]
         values, counts = np.unique(knots, return_counts=True)
         counts = np.minimum(counts, p)
+        mids = 0.5 * (values[:-1] + values[1:])
         lo, hi = patch.knots[1 - d][0], patch.knots[1 - d][-1]
         for fixed in (lo, hi):
-            uv = np.empty((values.size, 2))
+            uv, mid = np.empty((values.size, 2)), np.empty((mids.size, 2))
             uv[:, d], uv[:, 1 - d] = values, fixed
-            out.append((uv, counts))
+            mid[:, d], mid[:, 1 - d] = mids, fixed
+            out.append((uv, counts, mid))
     return out
 
 
@@ -73,26 +78,42 @@ def _snap(knots: np.ndarray, value: float, tol: float) -> float:
     return float(knots[near][0]) if near.any() else float(value)
 
 
-def _insertions(target: SplinePatch, points: np.ndarray, multiplicity: np.ndarray,
-                distance_tol: float, param_rtol: float) -> tuple[list, list]:
-    """Knots to insert into ``target`` (per direction) for the ``points`` lying on the
-    boundary of its parameter box (not at its corners)."""
+def _on_box_edge(target: SplinePatch, points: np.ndarray, distance_tol: float,
+                 param_rtol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(edge, uv)``: for each point, which edge of ``target``'s parameter box it lies on
+    (0, 1: u = lo, hi; 2, 3: v = lo, hi; -1: off the surface, inside it, or at a corner)."""
     uv, distance = invert_points(target, points)
+    lo = np.array([target.knots[0][0], target.knots[1][0]])
+    hi = np.array([target.knots[0][-1], target.knots[1][-1]])
+    tol = param_rtol * (hi - lo)
+    at = np.stack([np.abs(uv[:, 0] - lo[0]) <= tol[0], np.abs(uv[:, 0] - hi[0]) <= tol[0],
+                   np.abs(uv[:, 1] - lo[1]) <= tol[1], np.abs(uv[:, 1] - hi[1]) <= tol[1]], axis=1)
+    edge = np.where(at.sum(axis=1) == 1, np.argmax(at, axis=1), -1)
+    edge[distance > distance_tol] = -1
+    return edge, uv
+
+
+def _insertions(target: SplinePatch, edges: list, source: SplinePatch, distance_tol: float,
+                param_rtol: float) -> tuple[list, list]:
+    """Knots to insert into ``target`` (per direction) where a stretch of one of ``source``'s
+    ``edges`` runs along an edge of ``target``'s parameter box: a breakpoint of the source's
+    edge on the target's edge, with a span next to it on the same edge (its midpoint there).
+    A point where the two merely touch (a circle tangent to a square) adds nothing."""
     new = ([], [])
     lo = np.array([target.knots[0][0], target.knots[1][0]])
     hi = np.array([target.knots[0][-1], target.knots[1][-1]])
     tol = param_rtol * (hi - lo)
-    for (u, v), dist, m in zip(uv, distance, multiplicity):
-        if dist > distance_tol:
-            continue
-        on = [min(abs(x - lo[d]), abs(x - hi[d])) <= tol[d] for d, x in enumerate((u, v))]
-        if on[0] == on[1]:                             # inside the face, or at a corner
-            continue
-        d = 1 if on[0] else 0                          # on a u-edge the edge runs along v
-        x = _snap(target.knots[d], (u, v)[d], tol[d])
-        already = new[d].count(x)
-        count = _missing(target.knots[d], x, int(m), tol[d]) - already
-        new[d].extend([x] * max(count, 0))
+    for uv, counts, mid in edges:
+        at, t_uv = _on_box_edge(target, source.evaluate(uv), distance_tol, param_rtol)
+        mid_at, _ = _on_box_edge(target, source.evaluate(mid), distance_tol, param_rtol)
+        for i, (e, m) in enumerate(zip(at, counts)):
+            shared = [mid_at[j] == e for j in (i - 1, i) if 0 <= j < mid.shape[0]]
+            if e < 0 or not any(shared):
+                continue
+            d = 1 if e < 2 else 0                      # on a u-edge the edge runs along v
+            x = _snap(target.knots[d], t_uv[i, d], tol[d])
+            count = _missing(target.knots[d], x, int(m), tol[d]) - new[d].count(x)
+            new[d].extend([x] * max(count, 0))
     return new
 
 
@@ -122,19 +143,16 @@ def conforming_faces(faces: Sequence[SplinePatch], names: Sequence[str] | None =
     for _ in range(MAX_PASSES):
         changed = False
         for b, source in enumerate(faces):
-            edges = _edge_knots(source)
-            points = np.vstack([source.evaluate(uv) for uv, _ in edges])
-            counts = np.concatenate([m for _, m in edges])
+            edges = _edges(source)
+            points = np.vstack([source.evaluate(uv) for uv, _, _ in edges])
             for a, target in enumerate(faces):
                 if a == b:
                     continue
                 box = target.control_points.reshape(-1, 3)      # convex hull: quick rejection
-                near = np.all((points >= box.min(0) - distance_tol)
-                              & (points <= box.max(0) + distance_tol), axis=1)
-                if not near.any():
+                if not np.any(np.all((points >= box.min(0) - distance_tol)
+                                     & (points <= box.max(0) + distance_tol), axis=1)):
                     continue
-                new_u, new_v = _insertions(target, points[near], counts[near], distance_tol,
-                                           param_rtol)
+                new_u, new_v = _insertions(target, edges, source, distance_tol, param_rtol)
                 if new_u or new_v:
                     faces[a] = insert_knots(target, sorted(new_u), sorted(new_v))[0]
                     logger.info("%s: knots %s (u), %s (v) inserted where %s's edge meets it",

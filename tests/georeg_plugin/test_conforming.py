@@ -87,3 +87,16 @@ def test_a_feature_inside_a_face_adds_no_knot():
     out = conforming_faces([plate, wall])
     for f, g in zip((plate, wall), out):
         assert all(np.array_equal(a, b) for a, b in zip(f.knots, g.knots))
+
+
+def test_a_circle_touching_a_square_adds_no_knot():
+    """A cylinder's rim (breakpoints every 90 degrees) touches the square end plate's edges at
+    four points, its breakpoints: touching is not sharing a stretch of edge (the spans next to
+    the breakpoints run inside the square), so neither face gets a knot. (Without that test
+    the square took C0 lines through the tangent points: cylinder.step's discs did.)"""
+    from georeg_plugin.geometries import cylinder
+    tube = cylinder(10.0, 5.0, 360.0)                        # axis x, rims at x = -2.5, 2.5
+    plate = quadrilateral([[-2.5, -10, -10], [-2.5, 10, -10], [-2.5, 10, 10], [-2.5, -10, 10]])
+    out = conforming_faces([plate, tube])
+    for f, g in zip((plate, tube), out):
+        assert all(np.array_equal(a, b) for a, b in zip(f.knots, g.knots))
