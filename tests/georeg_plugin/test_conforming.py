@@ -9,6 +9,7 @@ from georeg_plugin.conforming import conforming_faces
 from georeg_plugin.geometries import quadrilateral
 from georeg_plugin.multipatch import NonConformingFacesError, part_mesh, part_space
 from georeg_plugin.refine import refine_to_elements, refine_uniform
+from test_multipatch import assert_nested_with_rigid_modes
 
 #: a long face A (x 0..40 along the fold y = 0) meeting two faces B (x 0..25) and C (25..40)
 A = quadrilateral([[0, 0, 0], [40, 0, 0], [40, 20, 4], [0, 20, 4]])
@@ -57,15 +58,7 @@ def test_an_edge_that_meets_two_faces_is_split_where_they_meet():
     mesh = part_mesh(fine)
     normals = np.vstack([fine[f].normals(mesh.uv[[i]]) for i, f in enumerate(mesh.node_face)])
     space = part_space(coarse, n_levels, mesh.uv, mesh.node_face, normals)
-    X = mesh.nodes
-    rigid = np.column_stack([normals] + [np.einsum("kd,kd->k", normals, np.cross(e, X))
-                                         for e in np.eye(3)])
-    for s in range(space.n_levels):
-        Cs = space.operators[s].toarray()
-        assert np.abs(rigid - Cs.T @ (Cs @ rigid)).max() < 1e-11 * np.abs(rigid).max()
-        if s + 1 < space.n_levels:
-            Cc = space.operators[s + 1].toarray()
-            assert np.abs(Cc.T - Cs.T @ (Cs @ Cc.T)).max() < 1e-10
+    assert_nested_with_rigid_modes(space, normals, mesh.nodes, rtol=1e-11)
     rng = np.random.default_rng(1)
     for level in range(space.n_levels):
         d = space.control_vectors(rng.standard_normal(space.operators[level].shape[0]), level)
