@@ -84,6 +84,50 @@ def test_georeg_measures_the_cad_part_within_5_um_and_beats_fe_and_tikhonov(part
         assert georeg < e, (label, e, georeg)
 
 
+def _split_folded_nominal(split_y: float = -8.0) -> list:
+    """The folded nominal with its left face cut in two along y = ``split_y`` (not a dyadic
+    point of the right face's edge): the crease is one edge of the right face against two of
+    the left pieces, which split it differently."""
+    from georeg_plugin.geometries import quadrilateral
+    left, right = cad_nominal("folded")
+    c = left.evaluate([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])    # corners (u, v)
+    t = (split_y - c[0, 1]) / (c[3, 1] - c[0, 1])
+    a, b = c[0] + t * (c[3] - c[0]), c[1] + t * (c[2] - c[1])
+    return [quadrilateral([c[0], c[1], b, a]), quadrilateral([a, b, c[2], c[3]]), right]
+
+
+def test_faces_that_split_the_crease_differently_are_coupled_and_measured_within_5_um(
+        parts, monkeypatch):
+    """Three faces, the crease shared by one face on one side and two on the other: the
+    common refinement (georeg_plugin.conforming) couples them; georeg measures the part within
+    5 um of the truth and below FE and Tikhonov. Without the coupling the part is refused,
+    naming two faces."""
+    import georeg_app.cad as cad
+    folder, scene = parts["folded"]
+    write_iges(folder / "split.igs", _split_folded_nominal(), names=["left_a", "left_b", "right"])
+    config = Config(images=ImagesConfig(folder / "cam0.png", folder / "cam1.png"),
+                    cameras=CamerasConfig(file=folder / "cameras.json"),
+                    geometry=GeometryConfig(kind="cad", file=folder / "split.igs", elements=64),
+                    method=MethodConfig(levels=2, scales=2), output=OutputConfig(folder / "out"),
+                    source=None)
+    scales = (1, 0)
+    specs = [MethodSpec("fe", None, scales, "FE"), tikhonov_spec(5.0, scales),
+             georeg_spec(2, scales)]
+    run = run_methods(config, specs, images=scene.images, truth=Truth(scene.specimen, scene.cameras))
+    errors = {}
+    for r in run.results:
+        assert r.ok, (r.spec.label, r.failure)
+        errors[r.spec.label] = rms(bounded_shape_error(r.measurement.nodes, scene.specimen))
+    print("split crease, RMS errors (mm):", errors)            # pytest -s shows them
+    georeg = errors.pop("georeg 2 levels (multiscale)")
+    assert georeg <= 5e-3, errors
+    for label, e in errors.items():
+        assert georeg < e, (label, e, georeg)
+    monkeypatch.setattr(cad, "conforming_faces", lambda faces, names: list(faces))
+    with pytest.raises(ValueError, match=r"split\.igs: face \d \('(left_a|left_b|right)'\) and face"):
+        build_model(config.geometry, 2)
+
+
 def test_measure_writes_the_faces_of_the_part(parts, tmp_path):
     """VTU with the cell data `face`, one measured NURBS per face in the JSON and the IGES."""
     folder, scene = parts["folded"]
