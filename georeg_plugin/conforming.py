@@ -10,9 +10,10 @@ The coupling used here is the common refinement: every knot of one face's edge (
 end of that edge) that lies inside the other face's edge, with a span of the edge next to it
 running along the other's edge too (a shared stretch; a point where two edges merely touch,
 such as a rim circle tangent to a square plate's edge, adds nothing), is inserted into the
-other face, in the direction along that edge, the ends with the full multiplicity ``p`` (the edge curve
-splits there into separate pieces, one per neighbour) and the knots of the edge with their own
-multiplicity. Knot insertion leaves each surface exactly as it was (Eq. 15); afterwards the
+other face, in the direction along that edge, with the continuity the source has there, in
+the target's degree: C0 at an end (multiplicity ``p``: the edge curve splits there into
+separate pieces, one per neighbour), ``C^(p_s - m)`` at a knot of multiplicity ``m``. Knot
+insertion leaves each surface exactly as it was (Eq. 15); afterwards the
 shared stretch of edge has the same knots on both faces, so a common dyadic refinement keeps
 it so, the FE nodes along it coincide and so do the control points wherever the two faces
 parameterize the edge alike (affinely: the straight edges of planes, cylinders, cones, and
@@ -46,14 +47,15 @@ MAX_PASSES = 20
 
 
 def _edges(patch: SplinePatch) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Per edge of the parameter box: ``(uv, multiplicity, mid)``: its breakpoints, ends
-    included (multiplicity ``p`` at the ends: where the edge stops, a neighbour's must split),
-    and the midpoints of its spans."""
+    """Per edge of the parameter box: ``(uv, continuity, mid)``: its breakpoints, ends
+    included, with the order ``k`` of the basis's continuity there (``C^k``: ``p - m`` for a
+    knot of multiplicity ``m``; 0 at the ends: where the edge stops, a neighbour's must split
+    into separate pieces), and the midpoints of its spans."""
     out = []
     for d in (0, 1):                                   # the direction along the edge
         knots, p = patch.knots[d], patch.degrees[d]
         values, counts = np.unique(knots, return_counts=True)
-        counts = np.minimum(counts, p)
+        counts = p - np.minimum(counts, p)             # the continuity C^k at each breakpoint
         mids = 0.5 * (values[:-1] + values[1:])
         lo, hi = patch.knots[1 - d][0], patch.knots[1 - d][-1]
         for fixed in (lo, hi):
@@ -106,13 +108,14 @@ def _insertions(target: SplinePatch, edges: list, source: SplinePatch, distance_
     for uv, counts, mid in edges:
         at, t_uv = _on_box_edge(target, source.evaluate(uv), distance_tol, param_rtol)
         mid_at, _ = _on_box_edge(target, source.evaluate(mid), distance_tol, param_rtol)
-        for i, (e, m) in enumerate(zip(at, counts)):
+        for i, (e, k) in enumerate(zip(at, counts)):
             shared = [mid_at[j] == e for j in (i - 1, i) if 0 <= j < mid.shape[0]]
             if e < 0 or not any(shared):
                 continue
             d = 1 if e < 2 else 0                      # on a u-edge the edge runs along v
             x = _snap(target.knots[d], t_uv[i, d], tol[d])
-            count = _missing(target.knots[d], x, int(m), tol[d]) - new[d].count(x)
+            m = max(1, target.degrees[d] - int(k))     # the same continuity in the target
+            count = _missing(target.knots[d], x, m, tol[d]) - new[d].count(x)
             new[d].extend([x] * max(count, 0))
     return new
 

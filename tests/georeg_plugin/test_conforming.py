@@ -93,3 +93,14 @@ def test_a_circle_touching_a_square_adds_no_knot():
     out = conforming_faces([plate, tube])
     for f, g in zip((plate, tube), out):
         assert all(np.array_equal(a, b) for a, b in zip(f.knots, g.knots))
+
+
+
+def test_the_split_keeps_the_neighbour_s_continuity_in_the_target_s_degree():
+    """A bicubic A against the biquadratic B and C: where they meet (x = 25, C0 between B and
+    C) A gets a triple knot, C0 in degree 3; its surface unchanged; the FE mesh conforms."""
+    cubic = quadrilateral([[0, 0, 0], [40, 0, 0], [40, 20, 4], [0, 20, 4]], (3, 3))
+    out = conforming_faces([cubic, B, C])
+    _same_surface([cubic, B, C], out)
+    assert np.count_nonzero(np.isclose(out[0].knots[0], 0.625)) == 3
+    part_mesh([refine_uniform(f, 2)[0] for f in out])            # no NonConformingFacesError
