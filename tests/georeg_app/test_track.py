@@ -168,18 +168,24 @@ def test_track_follows_a_cad_part_of_two_faces(series, tmp_path):
     assert np.bincount(face).tolist() == [16, 16]
 
 
+def _measure_reference(folder, shape, geometry: str):
+    """`georeg measure` (georeg, 2 levels, exact cameras) of the reference pair with the
+    [geometry] lines ``geometry``, into the folder ``shape``; returns it."""
+    measure = folder / "measure_reference.toml"
+    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
+                       f'file = "cameras.json"\n[geometry]\n{geometry}\n[method]\nname = "georeg"\n'
+                       'levels = 2\ncalibrate = false\nscales = 2\n')
+    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    return shape
+
+
 def test_a_part_s_measure_folder_as_reference_is_refused_naming_the_way(series, tmp_path, capsys):
     """A `georeg measure` folder of a CAD part cannot be rebuilt as a part (no face
     parameters saved): refused naming its spline file and the configuration that works."""
     folder, _ = series
     _write_halves(folder)
-    shape = tmp_path / "shape"
-    measure = folder / "measure_part.toml"
-    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
-                       'file = "cameras.json"\n[geometry]\nkind = "cad"\nfile = "halves.igs"\n'
-                       'elements = 32\n[method]\nname = "georeg"\nlevels = 2\ncalibrate = false\n'
-                       'scales = 2\n')
-    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    shape = _measure_reference(folder, tmp_path / "shape",
+                               'kind = "cad"\nfile = "halves.igs"\nelements = 32')
     config = _config(folder, extra=f'[reference]\ndir = "{shape}"',
                      displacement='method = "georeg"\nlevels = 1')
     _fails_naming(capsys, config, tmp_path / "out", "_spline.json", "part of several faces",
@@ -271,13 +277,8 @@ def test_a_georeg_measure_folder_is_a_reference(series, tmp_path):
     """`georeg measure` (georeg, 2 levels) on the reference pair, then `georeg track` with
     [reference] dir = its folder and the georeg displacement on the measured spline."""
     folder, _ = series
-    shape = tmp_path / "shape"
-    measure = folder / "measure.toml"
-    measure.write_text('[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n[cameras]\n'
-                       'file = "cameras.json"\n[geometry]\nkind = "rectangle"\nlength_mm = 44.0\n'
-                       'width_mm = 30.0\nelements = 16\n[method]\nname = "georeg"\nlevels = 2\n'
-                       'calibrate = false\nscales = 2\n')
-    assert cli.main(["-q", "measure", str(measure), "--out", str(shape)]) == 0
+    shape = _measure_reference(folder, tmp_path / "shape",
+                               'kind = "rectangle"\nlength_mm = 44.0\nwidth_mm = 30.0\nelements = 16')
     out = tmp_path / "out"
     config = _config(folder, series_keys='cam0 = ["frames/f2_cam0.png"]\ncam1 = ["frames/f2_cam1.png"]',
                      extra=f'[reference]\ndir = "{shape}"', displacement='method = "georeg"\nlevels = 1')
