@@ -268,16 +268,29 @@ def check_texture(X: np.ndarray, mask: np.ndarray, images: Sequence[Image], came
                 f"{MIN_TEXTURE_RATIO:g} needed): a uniform or pure-noise image, or the wrong image")
 
 
-def judge(residual_percent: float, noise_percent: float, q: np.ndarray, nodes: np.ndarray,
-          finest: ScaleReport, settings: MeasurementSettings) -> str | None:
-    """Why a measurement cannot be trusted, or None (see the module docstring)."""
-    if not np.isfinite(residual_percent):
-        return "no integration point is seen by both cameras at the finest scale"
+class ShapeDivergedError(RuntimeError):
+    """The shape left its bounds at a coarse scale: the next scale is not started (its pixel
+    quadrature would follow a surface metres wide)."""
+
+
+def _diverged(q: np.ndarray, nodes: np.ndarray, settings: MeasurementSettings) -> str | None:
+    """Why the correction ``q`` is unbounded (``max_shape_fraction`` of the mesh), or None."""
     size = float(np.linalg.norm(np.ptp(nodes, axis=0)))
     largest = float(np.max(np.abs(q))) if q.size else 0.0
     if not np.isfinite(largest) or largest > settings.max_shape_fraction * size:
         return (f"the shape diverged: a correction of {largest:.3g} mm, more than "
                 f"{settings.max_shape_fraction:g} of the mesh size ({size:.3g} mm)")
+    return None
+
+
+def judge(residual_percent: float, noise_percent: float, q: np.ndarray, nodes: np.ndarray,
+          finest: ScaleReport, settings: MeasurementSettings) -> str | None:
+    """Why a measurement cannot be trusted, or None (see the module docstring)."""
+    if not np.isfinite(residual_percent):
+        return "no integration point is seen by both cameras at the finest scale"
+    diverged = _diverged(q, nodes, settings)
+    if diverged is not None:
+        return diverged
     ratio = residual_percent / noise_percent if noise_percent > 0 else np.inf
     if not ratio <= settings.consistency_factor:
         return (f"the residual {residual_percent:.3g}% is {ratio:.3g} times the {noise_percent:.3g}% "
@@ -443,6 +456,10 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                         "shape Gauss-Newton" if not shape.converged else "fixed point")
         logger.info("scale %d: residual %.3f%% (noise floor %.3f%%)", scale,
                     report.residual_percent, report.noise_percent)
+        diverged = None if finest else _diverged(q, mesh.nodes, settings)
+        if diverged is not None:                 # the finest scale's verdict says it (judge)
+            raise ShapeDivergedError(f"{diverged} at image scale {scale}; the finer scales "
+                                     "were not started")
         if progress is not None:
             progress(k, len(settings.scales), report)
     residual, quad = result

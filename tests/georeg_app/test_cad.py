@@ -227,3 +227,22 @@ def test_compare_measures_the_part_with_every_method(parts, tmp_path):
         vtu = meshio.read(out / m["mesh_file"])
         assert np.concatenate(vtu.cell_data["face"]).tolist() == [0] * 64
     assert len(list(out.glob("*_spline.igs"))) == 1
+
+
+def test_swapped_images_that_make_the_shape_diverge_stop_at_the_coarse_scale(parts, tmp_path, capsys):
+    """The split-crease part with its images swapped: the shape leaves its bounds at the coarse
+    scale (metres); the measurement stops there, exit 1, naming it, nothing written (before,
+    the next scale's pixel quadrature followed the metre-wide surface until the process was
+    killed for memory)."""
+    import shutil
+    folder, _ = parts["folded"]
+    for name in ("cameras.json",):
+        shutil.copy(folder / name, tmp_path / name)
+    shutil.copy(folder / "cam0.png", tmp_path / "cam1.png")
+    shutil.copy(folder / "cam1.png", tmp_path / "cam0.png")
+    write_iges(tmp_path / "split.igs", _split_folded_nominal(), names=["left_a", "left_b", "right"])
+    out = tmp_path / "out"
+    assert cli.main(["-q", "measure", str(_config_file(tmp_path, file="split.igs")), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "the shape diverged" in err and "the finer scales were not started" in err, err
+    assert not out.exists() or not any(out.iterdir())
