@@ -68,7 +68,8 @@ class MeasurementSettings:
     consistency_factor : the final residual may be at most this many times the noise
         floor of the images (:data:`fesdic_core.noise.CONSISTENCY_FACTOR`).
     max_shape_fraction : the correction may reach at most this fraction of the mesh's
-        diagonal; a larger one is a diverged measurement.
+        diagonal; a larger one is a diverged measurement (checked at the end of every scale:
+        a coarse scale beyond it raises :class:`ShapeDivergedError`).
     uncertainty : at the end, estimate the noise model and the shape's standard deviation
         and bias indicator (:mod:`fesdic_core.uncertainty`); costs about two Gauss-Newton
         iterations at the finest scale.
