@@ -40,20 +40,30 @@ def _exponents(reference: str, degree: int) -> np.ndarray:
     return np.array(pairs, dtype=np.int64)
 
 
+def _powers(t: np.ndarray, degree: int) -> np.ndarray:
+    """``t**k`` for k = 0..degree, (m, degree + 1), by repeated products."""
+    out = np.empty((len(t), degree + 1))
+    out[:, 0] = 1.0
+    for k in range(1, degree + 1):
+        out[:, k] = out[:, k - 1] * t
+    return out
+
+
 def _monomials(xi: np.ndarray, exponents: np.ndarray) -> np.ndarray:
     """Monomials ``xi^a eta^b`` at the points, (m, nn)."""
-    return xi[:, None, 0] ** exponents[None, :, 0] * xi[:, None, 1] ** exponents[None, :, 1]
+    degree = int(exponents.max())
+    px, py = _powers(xi[:, 0], degree), _powers(xi[:, 1], degree)
+    return px[:, exponents[:, 0]] * py[:, exponents[:, 1]]
 
 
 def _monomial_derivatives(xi: np.ndarray, exponents: np.ndarray) -> np.ndarray:
-    """Derivatives d/dxi, d/deta of the monomials at the points, (m, nn, 2)."""
-    a = exponents[None, :, 0]
-    b = exponents[None, :, 1]
-    x = xi[:, None, 0]
-    y = xi[:, None, 1]
-    d_xi = a * x ** np.maximum(a - 1, 0) * y ** b
-    d_eta = b * x ** a * y ** np.maximum(b - 1, 0)
-    return np.stack([d_xi, d_eta], axis=-1)
+    """Derivatives d/dxi, d/deta of the monomials at the points, (m, 2, nn)."""
+    degree = int(exponents.max())
+    px, py = _powers(xi[:, 0], degree), _powers(xi[:, 1], degree)
+    a, b = exponents[:, 0], exponents[:, 1]
+    d_xi = a * px[:, np.maximum(a - 1, 0)] * py[:, b]
+    d_eta = b * px[:, a] * py[:, np.maximum(b - 1, 0)]
+    return np.stack([d_xi, d_eta], axis=1)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -125,8 +135,10 @@ class ElementFamily:
     def shape_derivatives(self, xi: np.ndarray) -> np.ndarray:
         """Derivatives ``(dL_I/dxi, dL_I/deta)`` at xi (m, 2) -> (m, nn, 2)."""
         xi = self._points(xi)
-        d_monomials = _monomial_derivatives(xi, self.exponents)  # (m, nn, 2)
-        return np.einsum("mka,ki->mia", d_monomials, self._inverse_vandermonde)
+        d_monomials = _monomial_derivatives(xi, self.exponents)  # (m, 2, nn)
+        m, nn = len(xi), self.n_nodes
+        dN = (d_monomials.reshape(2 * m, nn) @ self._inverse_vandermonde).reshape(m, 2, nn)
+        return np.ascontiguousarray(dN.transpose(0, 2, 1))
 
 
 _QUAD_CORNERS = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
