@@ -176,10 +176,14 @@ def point_normals(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray) -
         dN = _reference_rule(block.family, n0, n1)[3]            # (m, nn, 2), cached
         if dN.shape[0] != m or not np.array_equal(_reference_rule(block.family, n0, n1)[0], xi):
             dN = block.family.shape_derivatives(xi)
-        Xe = nodes[group.connectivity]                                           # (E, nn, 3)
-        a = dN[..., 0] @ Xe                                    # X,xi (E, m, 3)
-        b = dN[..., 1] @ Xe                                    # X,eta
-        out[group.span] = np.cross(a, b).reshape(-1, 3)
+        E, nn = group.connectivity.shape
+        Xe = nodes[group.connectivity].transpose(1, 0, 2).reshape(nn, 3 * E)   # (nn, E * 3)
+        a = (dN[..., 0] @ Xe).reshape(m, E, 3)                  # X,xi (m, E, 3): one product
+        b = (dN[..., 1] @ Xe).reshape(m, E, 3)                  # X,eta
+        n = out[group.span].reshape(E, m, 3)
+        n[..., 0] = (a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]).T
+        n[..., 1] = (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]).T
+        n[..., 2] = (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]).T
     norm = np.linalg.norm(out, axis=1, keepdims=True)
     return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
