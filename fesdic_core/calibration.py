@@ -130,10 +130,19 @@ def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
     return M, rhs
 
 
+def _shift_px(cameras, before, probe: np.ndarray) -> float:
+    """Largest shift (px) of the projections of ``probe`` (k, 3) between two camera sets."""
+    if not len(probe):
+        return 0.0
+    return max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
+               for a, b in zip(cameras, before))
+
+
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
-                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, rcond: float = 1e-9,
+                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, tol_px: float = 0.0,
+                         rcond: float = 1e-9,
                          residual_rtol: float = 1e-4, max_damping: int = 8,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
                          context: dict | None = None,
@@ -145,6 +154,10 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     stereo : (R, t), optional
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
+    tol_px : a step that would move no point of ``X`` by more than this many pixels (in
+        ``cameras``' own pixels) in either camera is stagnant too (0: no such test). A caller
+        that iterates the calibration inside its own loop with a tolerance in pixels passes
+        a tenth of it: a smaller step cannot change that loop's verdict.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     residual_rtol : also stop when the residual changes by less than this fraction.
     max_damping : a step that raises the residual is retried with the Levenberg-Marquardt
@@ -189,7 +202,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             return abs(2.0 * dp @ rhs - dp @ M @ dp) * per_unit
         rows = plain.reshape(-1, 6)
         if (np.max(np.abs(rows[:, :3])) < tol_rad and np.max(np.abs(rows[:, 3:])) < tol_mm
-                or fall(plain) < 1.0):
+                or fall(plain) < 1.0 or _shift_px(moved(plain), cams, probe) < tol_px):
             converged = True                   # p stagnates: the step is not taken
             logger.debug("calibration it %d: the step is stagnant (predicted chi-square fall "
                          "%.3g)", it, fall(plain))
@@ -217,8 +230,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         mu, steps = relaxed(mu), steps + 1
         rot = float(np.max(np.abs(dp.reshape(-1, 6)[:, :3])))
         tra = float(np.max(np.abs(dp.reshape(-1, 6)[:, 3:])))
-        shift = max(float(np.max(np.linalg.norm(a.project(probe) - b.project(probe), axis=1)))
-                    for a, b in zip(cams, before)) if len(probe) else 0.0
+        shift = _shift_px(cams, before, probe)
         if log is not None:
             log.add(**(context or {}), stage="calibration", iteration=it,
                     residual_percent=res.std_percent, step=max(rot, tra), shift_px=shift,

@@ -108,3 +108,25 @@ def test_truncated_solve_is_orthogonal_to_the_frozen_directions():
     free = np.linalg.svd((frozen * np.diag(M)[:, None]).T)[2][2:].T        # x = free @ y
     np.testing.assert_allclose(free.T @ (M @ x - rhs), 0.0, atol=1e-9 * np.abs(rhs).max())
     np.testing.assert_allclose(truncated_solve(M, rhs, 1e-12), np.linalg.solve(M, rhs), rtol=1e-8)
+
+
+def test_a_step_below_tol_px_is_not_taken(problem):
+    """``tol_px``: the calibration stops before a step that would move no point by more than
+    ``tol_px`` pixels, and then sits within ``tol_px`` of the fully converged poses."""
+    coarse = _calibrate(problem, problem["start"], 1)
+    cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(problem["start"], coarse.cameras)]
+    full = _calibrate(problem, cams, 0)
+    probe = problem["nodes"]
+
+    def shift(a, b):
+        return max(np.max(np.linalg.norm(x.project(probe) - y.project(probe), axis=1))
+                   for x, y in zip(a, b))
+    first = _calibrate(problem, cams, 0, max_iter=1)
+    step = shift(first.cameras, [c.scaled(0) for c in cams])     # the first step, px
+    assert full.steps >= 2 and step > 1e-2
+    stopped = _calibrate(problem, cams, 0, tol_px=2.0 * step)
+    assert stopped.converged and stopped.steps == 0             # the first step is below tol
+    tol = 0.5 * step
+    one = _calibrate(problem, cams, 0, tol_px=tol)
+    assert one.converged and 1 <= one.steps < full.steps
+    assert shift(one.cameras, full.cameras) < tol
