@@ -141,7 +141,7 @@ def _shift_px(cameras, before, probe: np.ndarray) -> float:
 def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence, cameras: Sequence,
                          stereo: tuple[np.ndarray, np.ndarray] | None = None,
                          normalisation: str = "element", max_iter: int = 20,
-                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, tol_px: float = 0.0,
+                         tol_rad: float = 1e-7, tol_mm: float = 1e-5, undamped_px: float = 0.0,
                          rcond: float = 1e-9,
                          residual_rtol: float = 1e-4, max_damping: int = 8,
                          frozen: np.ndarray | None = None, extra_mask=None, log=None,
@@ -154,10 +154,12 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     stereo : (R, t), optional
         Stereo relation to keep (6 unknowns); None frees both cameras (12 unknowns).
     tol_rad, tol_mm : stagnation thresholds on the rotation and translation updates.
-    tol_px : a step that would move no point of ``X`` by more than this many pixels (in
-        ``cameras``' own pixels) in either camera is stagnant too (0: no such test). A caller
-        that iterates the calibration inside its own loop with a tolerance in pixels passes
-        a tenth of it: a smaller step cannot change that loop's verdict.
+    undamped_px : a Gauss-Newton step that would move no point of ``X`` by more than this
+        many pixels (``cameras``' own) in either camera is not damped: if it does not lower
+        the residual, p has stagnated (the linearised model's predicted fall is then below
+        what the images resolve). 0: every step that raises the residual is damped. A caller
+        that iterates the calibration inside a loop with a tolerance in pixels passes that
+        tolerance: a smaller step cannot change the loop's verdict.
     frozen : (6 or 12, k), optional, parameter directions not to move (the gauge).
     residual_rtol : also stop when the residual changes by less than this fraction.
     max_damping : a step that raises the residual is retried with the Levenberg-Marquardt
@@ -202,17 +204,20 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
             return abs(2.0 * dp @ rhs - dp @ M @ dp) * per_unit
         rows = plain.reshape(-1, 6)
         if (np.max(np.abs(rows[:, :3])) < tol_rad and np.max(np.abs(rows[:, 3:])) < tol_mm
-                or fall(plain) < 1.0 or _shift_px(moved(plain), cams, probe) < tol_px):
+                or fall(plain) < 1.0):
             converged = True                   # p stagnates: the step is not taken
             logger.debug("calibration it %d: the step is stagnant (predicted chi-square fall "
                          "%.3g)", it, fall(plain))
             break
 
         within_noise = []
+        small = _shift_px(moved(plain), cams, probe) < undamped_px
+        tried = []
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
-            if within_noise:                 # more damping only shortens a stagnant step
+            if within_noise or (small and tried):  # a small step that failed: stagnant
                 return None
+            tried.append(mu)
             dp = truncated_solve(M + mu * np.diag(np.diag(M)), rhs, rcond, frozen)
             if mu > 0.0 and fall(dp) < 1.0:
                 within_noise.append(mu)      # a refused step damped into the noise: stagnant

@@ -59,9 +59,9 @@ class MeasurementSettings:
         then move within their own noise; and when the calibration of a later iteration
         takes no step (its step is stagnant before it is evaluated), since the shape that
         ended the previous iteration already sits at its optimum for these poses. The
-        calibration inside the fixed point takes no step that would move the points by
-        less than a tenth of ``fixed_point_tol_px``: such a step cannot change the fixed
-        point's verdict.
+        calibration inside the fixed point does not damp a step that would move the points
+        by less than ``fixed_point_tol_px``: if that step does not lower the residual, the
+        poses have stagnated (such a step cannot change the fixed point's verdict).
     fixed_point_rtol : at a coarse scale (not the finest), the shape Gauss-Newton and the
         fixed point also hand over to the next scale when the residual falls by less than
         this fraction in an iteration (a coarse scale only starts the next, Remark 3); at
@@ -185,9 +185,6 @@ class Measurement:
 #: a rigid normal part of q below this (mm) is round-off: left in q, not handed to the poses
 #: (the state, and the residual evaluated there, stay as they are)
 _NO_RIGID_PART_MM = 1e-10
-#: the calibration inside the fixed point stops at a step below this fraction of
-#: ``fixed_point_tol_px`` (calibrate_extrinsics' ``tol_px``)
-_INNER_TOL = 0.1
 
 
 class MeasurementInputError(ValueError):
@@ -397,7 +394,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                                            normalisation=settings.normalisation,
                                            max_iter=settings.max_iter, extra_mask=mask,
                                            tol_rad=1e-7 * coarse, tol_mm=1e-5 * coarse,
-                                           tol_px=_INNER_TOL * settings.fixed_point_tol_px,
+                                           undamped_px=settings.fixed_point_tol_px,
                                            log=log, context={**context, "scale": scale},
                                            start=known)
                 cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
