@@ -1,7 +1,10 @@
 """Calibration of the extrinsics at fixed shape (Eq. 6), with the frozen (gauge) directions."""
+import dataclasses
+
 import numpy as np
 import pytest
 
+import fesdic_core.calibration as calibration
 from fesdic_core.accuracy import stereo_correspondence_error
 from fesdic_core.calibration import (_parameter_gradients, calibrate_extrinsics,
                                      rigid_rig_gradients, truncated_solve)
@@ -114,17 +117,18 @@ def test_a_small_step_that_fails_is_not_damped(problem, monkeypatch):
     """``undamped_px``: a step below it that does not lower the residual ends the
     calibration at once (p stagnant), where the Levenberg-Marquardt guard would evaluate
     the images again for every tenfold damping."""
-    import dataclasses
-
-    import fesdic_core.calibration as calibration
     coarse = _calibrate(problem, problem["start"], 1)
     cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(problem["start"], coarse.cameras)]
-    best = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, _calibrate(problem, cams, 0).cameras)]
+    fine = _calibrate(problem, cams, 0)
+    best = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, fine.cameras)]
     quad = problem["quads"][0]
     X = quad.points(problem["nodes"])
     # a start near the optimum that claims a fit 2 % better than the images give there: its
     # Gauss-Newton step (to the optimum, about 0.003 px) cannot reach the residual claimed
     near = move_cameras_with_specimen(best, np.array([2e-4, 0.0, 0.0]), np.zeros(3), np.zeros(3))
+    shift = max(np.max(np.linalg.norm(a.project(X) - b.project(X), axis=1))
+                for a, b in zip(near, best))
+    assert 1e-3 < shift < 0.01                 # the start is near the optimum, below 0.01 px
     real = gray_level_residual(X, quad, problem["images"][0], near, jacobian="point")
     start = dataclasses.replace(real, std_percent=0.98 * real.std_percent)
     calls = []
@@ -132,15 +136,12 @@ def test_a_small_step_that_fails_is_not_damped(problem, monkeypatch):
     monkeypatch.setattr(calibration, "gray_level_residual",
                         lambda *a, **k: calls.append(1) or original(*a, **k))
 
-    def run(undamped_px):
+    def evaluations(undamped_px):
         calls.clear()
         out = calibrate_extrinsics(X, quad, problem["images"][0], near, stereo=problem["stereo"],
                                    frozen=problem["frozen"], start=start, undamped_px=undamped_px)
         return out, len(calls)
-    stopped, evaluations = run(0.01)
-    assert stopped.converged and stopped.steps == 0 and evaluations == 1
-    damped, evaluations = run(0.0)
-    assert evaluations > 1                     # the guard tried damped steps
-    shift = max(np.max(np.linalg.norm(a.project(X) - b.project(X), axis=1))
-                for a, b in zip(near, best))
-    assert 1e-3 < shift < 0.01                 # the start is near the optimum, below 0.01 px
+    stopped, count = evaluations(0.01)
+    assert stopped.converged and stopped.steps == 0 and count == 1
+    _, count = evaluations(0.0)
+    assert count > 1                           # the guard tried damped steps
