@@ -426,7 +426,6 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
             if np.max(np.abs(q_moved - q), initial=0.0) > _NO_RIGID_PART_MM:
                 q, cams = q_moved, cams_moved
                 final = None                     # the state moved (by the gauge) since
-            known = final                        # else the next calibration starts from it
             scaled = [c.scaled(scale) for c in cams]
             X_nodes = current_nodes(mesh.nodes, normals, q)
             dq = float(np.max(np.abs(q - q_before)))
