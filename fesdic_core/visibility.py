@@ -180,7 +180,7 @@ def point_normals(mesh: SurfaceMesh, quad: PixelQuadrature, nodes: np.ndarray) -
         Xe = nodes[group.connectivity].transpose(1, 0, 2).reshape(nn, 3 * E)   # (nn, E * 3)
         a = (dN[..., 0] @ Xe).reshape(m, E, 3)                  # X,xi (m, E, 3): one product
         b = (dN[..., 1] @ Xe).reshape(m, E, 3)                  # X,eta
-        n = out[group.span].reshape(E, m, 3)
+        n = out[group.span].reshape(E, m, 3)                   # a view: written into out
         n[..., 0] = (a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]).T
         n[..., 1] = (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]).T
         n[..., 2] = (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]).T
