@@ -1,10 +1,10 @@
 """Glue between the geometric regularization plugin and our FE-SDIC core.
 
 The core exposes one extension point, the linear solve of each Gauss-Newton step
-(:class:`fesdic_core.solvers.StepSolver`); the plugin's
-:class:`georeg_plugin.solver.GeometricRegularization` has exactly that ``solve``
+(:class:`fesdic_core.solve.solvers.StepSolver`); the plugin's
+:class:`georeg_plugin.levels.solver.GeometricRegularization` has exactly that ``solve``
 method. This module only translates data between the two: the plugin's FE mesh of a
-spline into the core's :class:`~fesdic_core.mesh.SurfaceMesh`, the core's node normals
+spline into the core's :class:`~fesdic_core.fe.mesh.SurfaceMesh`, the core's node normals
 into the plugin's operators, and the measured correction ``q`` back into a spline
 (Eq. 21). Neither package is changed.
 """
@@ -17,16 +17,16 @@ from typing import Mapping
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.elements import family_from_meshio
-from fesdic_core.gauge import rigid_normal_modes
-from fesdic_core.mesh import CellBlock, SurfaceMesh, node_normals
-from georeg_plugin.curved import is_flat
-from georeg_plugin.fe_mesh import check_element_degree, fe_mesh_from_spline
-from georeg_plugin.multipatch import part_component_space, part_mesh, part_space
-from georeg_plugin.operators import MultilevelSpace, extraction_operator, multilevel_space
-from georeg_plugin.patch import SplinePatch
-from georeg_plugin.refine import refine_uniform, refine_to_elements
-from georeg_plugin.solver import GeometricRegularization
+from fesdic_core.fe.elements import family_from_meshio
+from fesdic_core.shape.gauge import rigid_normal_modes
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals
+from georeg_plugin.levels.curved import is_flat
+from georeg_plugin.spline.fe_mesh import check_element_degree, fe_mesh_from_spline
+from georeg_plugin.levels.multipatch import part_component_space, part_mesh, part_space
+from georeg_plugin.levels.operators import MultilevelSpace, extraction_operator, multilevel_space
+from georeg_plugin.spline.patch import SplinePatch
+from georeg_plugin.spline.refine import refine_uniform, refine_to_elements
+from georeg_plugin.levels.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
@@ -103,13 +103,13 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
 
 def part_model(faces, refinements, names=None, family: str = "Q9",
                name: str = "part", loops=None) -> NominalModel:
-    """FE mesh of a part of several faces (:func:`georeg_plugin.multipatch.part_mesh`):
+    """FE mesh of a part of several faces (:func:`georeg_plugin.levels.multipatch.part_mesh`):
     every face refined ``refinements`` times dyadically (one count, or one per face),
     welded along shared edges; a face
     with trimming ``loops`` (per face: outer then holes in its ``(u, v)``, or None) keeps
     the elements inside them.
 
-    Raises :class:`~georeg_plugin.multipatch.NonConformingFacesError` naming two faces whose
+    Raises :class:`~georeg_plugin.levels.multipatch.NonConformingFacesError` naming two faces whose
     shared edge's nodes do not coincide."""
     faces = tuple(faces)
     counts = np.broadcast_to(np.asarray(refinements, dtype=int), (len(faces),))
@@ -124,7 +124,7 @@ def part_model(faces, refinements, names=None, family: str = "Q9",
 
 def elements_per_span(model: NominalModel, f: int, face: SplinePatch) -> float:
     """FE elements per coarse knot span of face ``f``: their count over the spans, or, when a
-    trimmed face kept fewer (``georeg_plugin.trimmed``), the spans' width over the spacing of
+    trimmed face kept fewer (``georeg_plugin.spline.trimmed``), the spans' width over the spacing of
     the Q9 element centres (node 8, never welded: its ``uv`` is on its own face)."""
     elements = model.element_face == f
     count = np.count_nonzero(elements) / np.prod(face.n_elements)
@@ -194,7 +194,7 @@ def multilevel_for_mesh(model: NominalModel, n_levels: int, curved: bool | None 
     ``curved``: True, a shape unknown along the core's node normals on a curved face: the
     scalar spline space when it holds the rigid normal motions
     (:func:`scalar_holds_rigid_motions`: a cylinder), else the vector formulation of
-    :mod:`georeg_plugin.curved` (control vectors seen along the normals; both: nested levels,
+    :mod:`georeg_plugin.levels.curved` (control vectors seen along the normals; both: nested levels,
     rigid normal motions in range); False (default), the scalar spline space
     ``C^T[I, J] = R_J(xi_I)`` (e.g. each component of a displacement); None: True when the
     nominal surface is not planar (:func:`is_curved`). A part of several faces always gets
@@ -226,7 +226,7 @@ def component_space_for_mesh(model: NominalModel, n_levels: int) -> MultilevelSp
     """The scalar spline levels of one component of a field on the core's mesh (a
     displacement: ``kron(C_s, I3)`` of these): :func:`multilevel_for_mesh` with
     ``curved=False`` for one patch; for a part, every face's levels glued where faces share
-    control points (:func:`~georeg_plugin.multipatch.part_component_space`)."""
+    control points (:func:`~georeg_plugin.levels.multipatch.part_component_space`)."""
     if not model.is_part:
         return multilevel_for_mesh(model, n_levels, curved=False)
     _check_part_levels(model, n_levels)
@@ -246,7 +246,7 @@ def scalar_holds_rigid_motions(model: NominalModel, space: MultilevelSpace) -> b
     cylinder or a cone (the normal is affine in the point along each ruling; measured 1e-13).
     A doubly curved face does not (7e-4 on a paraboloid patch). Where it holds, the scalar
     space is the curved nominal's (nested, rigid-complete, one dof per control point); the
-    vector formulation (:mod:`georeg_plugin.curved`) has the same properties with about twice
+    vector formulation (:mod:`georeg_plugin.levels.curved`) has the same properties with about twice
     the dofs, whose extra directions cost accuracy: on the Stereo DIC Challenge's bars its
     cylinder-fit residual was 2.5 / 3.4 um against 1.8 / 2.7 um with the scalar space, on the
     rendered cylindrical panel 1.13 against 0.76 um (``benchmarks/bench_cad_parts.py``).

@@ -4,7 +4,7 @@
    ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
 2. At the finest image scale, the level moves while the Bayesian information criterion
-   falls (:mod:`georeg_plugin.selection`): the gray-level cost at every other level, finer
+   falls (:mod:`georeg_plugin.levels.selection`): the gray-level cost at every other level, finer
    or coarser, is predicted from the converged Gauss-Newton system (the search looks
    ahead: it does not stop on a level that adds too little when a finer one holds a
    feature, and it leaves the start for a coarser level when the start's extra dofs only
@@ -13,11 +13,11 @@
    its measured criterion decides, and the prediction is renewed from there. A level is
    iterated at most once.
 3. If another level was chosen: with calibration, one more fixed point of calibration and
-   shape at that level (the core's :func:`~fesdic_core.driver.measure`); with fixed
+   shape at that level (the core's :func:`~fesdic_core.shape.driver.measure`); with fixed
    cameras, the search's last Gauss-Newton is the measurement, and the core's
-   :func:`~fesdic_core.driver.conclude` gives its verdict and uncertainty.
+   :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty.
 
-The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.uncertainty`:
+The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.shape.uncertainty`:
 image noise through the image model, scaled to the residual the FE model leaves), or the
 larger share per dof of the image model's misfit, measured on the dofs that the FE mesh
 adds beyond the finest spline level (:func:`effective_variance`).
@@ -33,20 +33,20 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from fesdic_core.driver import Measurement, MeasurementSettings, conclude, measure
-from fesdic_core.image import pyramid
-from fesdic_core.shape import shape_gauss_newton
-from fesdic_core.solvers import seen_dofs
-from fesdic_core.uncertainty import linearised_state
-from fesdic_core.mesh import node_normals
-from georeg_plugin.multipatch import part_space
-from georeg_plugin.operators import MultilevelSpace, nested_space
-from georeg_plugin.refine import insert_knots, refine_uniform
-from georeg_plugin.selection import (LevelTrial, information_criterion, noise_gain, penalty_per_dof,
+from fesdic_core.shape.driver import Measurement, MeasurementSettings, conclude, measure
+from fesdic_core.imaging.image import pyramid
+from fesdic_core.shape.operators import shape_gauss_newton
+from fesdic_core.solve.solvers import seen_dofs
+from fesdic_core.shape.uncertainty import linearised_state
+from fesdic_core.fe.mesh import node_normals
+from georeg_plugin.levels.multipatch import part_space
+from georeg_plugin.levels.operators import MultilevelSpace, nested_space
+from georeg_plugin.spline.refine import insert_knots, refine_uniform
+from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain, penalty_per_dof,
                                      predicted_fit)
-from georeg_plugin.solver import GeometricRegularization
+from georeg_plugin.levels.solver import GeometricRegularization
 
-from .fesdic_core import NominalModel, elements_per_span, is_curved, scalar_holds_rigid_motions
+from adapters.fesdic_core import NominalModel, elements_per_span, is_curved, scalar_holds_rigid_motions
 
 logger = logging.getLogger(__name__)
 
@@ -119,7 +119,7 @@ def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
     node parameters): dyadic refinements of the nominal with at most a quarter as many
     dofs as the mesh has nodes (a Q9 mesh has about four nodes per spline dof). A part of
     several faces (:func:`part_model`): every face refined dyadically together, glued
-    (:func:`~georeg_plugin.multipatch.part_space`), up to the mesh's resolution.
+    (:func:`~georeg_plugin.levels.multipatch.part_space`), up to the mesh's resolution.
 
     ``curved``: the formulation, as :func:`~adapters.fesdic_core.multilevel_for_mesh`'s; None
     (default): scalar on a flat face or one whose scalar space holds the rigid normal motions

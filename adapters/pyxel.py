@@ -42,10 +42,10 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from georeg_plugin.operators import multilevel_space
-from georeg_plugin.patch import SplinePatch
+from georeg_plugin.levels.operators import multilevel_space
+from georeg_plugin.spline.patch import SplinePatch
 
-from .protocol import LevelRecord, reduced_basis
+from adapters.protocol import LevelRecord, reduced_basis
 
 logger = logging.getLogger(__name__)
 

@@ -2,13 +2,13 @@
 
 Part 1, the operators: on a cylindrical NURBS panel (R 100 mm, 30 degrees, 40 mm) and a
 doubly curved bi-quadratic patch (40 x 30 mm), 4 levels over a 16 x 16 Q9 mesh, the
-vector formulation (:mod:`georeg_plugin.curved`) against the first formula tried
+vector formulation (:mod:`georeg_plugin.levels.curved`) against the first formula tried
 (``R_J(xi_I) (n_I . n_J)``) and the flat plates' scalar ``R_J(xi_I)``: nesting residual ``max |C_c^T - P_f C_c^T|`` (``P_f`` the
 projector on the fine range), rigid normal modes left outside the range (relative), rank.
 
 Part 2, the done-means renders of ``tests/scenes.py`` (``CAD_PARTS``: a cylindrical panel
 and a folded plate, 480 x 320 px, noise of 2 gray levels, nominal CAD given as an IGES
-file written by ``write_iges``), through ``georeg_app.pipeline.run_methods``: RMS error
+file written by ``write_iges``), through ``georeg_app.shape.pipeline.run_methods``: RMS error
 (normal distance to the true surface after the best small rigid motion, um) of FE,
 Tikhonov 2 / 5 / 10 mm and "auto", georeg 2 and 3 levels; scales (1, 0), calibrated.
 Last two columns: georeg with the scalar space ``R_J(xi_I)`` instead (``curved=False``,
@@ -31,19 +31,19 @@ sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).res
 import scenes  # noqa: E402
 from shape_truth import bounded_shape_error, rms  # noqa: E402
 
-from georeg_app.config import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
+from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
                                MethodConfig, OutputConfig)
-from georeg_app.methods import MethodSpec, georeg_spec, tikhonov_spec  # noqa: E402
+from georeg_app.shape.methods import MethodSpec, georeg_spec, tikhonov_spec  # noqa: E402
 from adapters.fesdic_core import georeg_solver  # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure  # noqa: E402
-from georeg_app.pipeline import Truth, build_model, run_methods  # noqa: E402
-from georeg_plugin.fe_mesh import fe_mesh_from_spline  # noqa: E402
-from georeg_plugin.geometries import cylinder  # noqa: E402
-from georeg_plugin.operators import extraction_operator, multilevel_space  # noqa: E402
-from georeg_plugin.patch import SplinePatch  # noqa: E402
-from georeg_plugin.refine import refine_uniform  # noqa: E402
-from georeg_plugin.spline_io import write_iges  # noqa: E402
-from fesdic_core.rig import write_cameras_json  # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
+from georeg_app.shape.pipeline import Truth, build_model, run_methods  # noqa: E402
+from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline  # noqa: E402
+from georeg_plugin.spline.geometries import cylinder  # noqa: E402
+from georeg_plugin.levels.operators import extraction_operator, multilevel_space  # noqa: E402
+from georeg_plugin.spline.patch import SplinePatch  # noqa: E402
+from georeg_plugin.spline.refine import refine_uniform  # noqa: E402
+from georeg_plugin.io.spline_io import write_iges  # noqa: E402
+from fesdic_core.cameras.rig import write_cameras_json  # noqa: E402
 
 
 def dome() -> SplinePatch:

@@ -47,13 +47,13 @@ def _median_time(fn, repeat: int) -> tuple[float, object]:
 
 
 def iteration(repeat: int) -> None:
-    from fesdic_core.image import Image
-    from fesdic_core.mesh import node_normals, rectangle_mesh
-    from fesdic_core.quadrature import pixel_quadrature
-    from fesdic_core.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
-    from fesdic_core.residual import gray_level_residual
-    from fesdic_core.shape import current_nodes, shape_operators
-    from fesdic_core.solvers import DirectSolver
+    from fesdic_core.imaging.image import Image
+    from fesdic_core.fe.mesh import node_normals, rectangle_mesh
+    from fesdic_core.fe.quadrature import pixel_quadrature
+    from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+    from fesdic_core.residual.graylevel import gray_level_residual
+    from fesdic_core.shape.operators import current_nodes, shape_operators
+    from fesdic_core.solve.solvers import DirectSolver
 
     dist = np.array([-0.06, 0.1, 0.0, 0.0, 0.0])
     cams = demo_cameras(image_size=(2448, 2048), stereo_angle_deg=25.0, field_mm=80.0, dist=dist)
@@ -95,8 +95,8 @@ def iteration(repeat: int) -> None:
 def interpolation(repeat: int, order: int = 3) -> None:
     from scipy import ndimage
 
-    from fesdic_core import bspline5, image as image_module
-    from fesdic_core.image import Image
+    from fesdic_core.imaging import bspline3, bspline5, image as image_module
+    from fesdic_core.imaging.image import Image
 
     h, w, n = 2048, 2448, 5_000_000
     rng = np.random.default_rng(0)
@@ -104,7 +104,7 @@ def interpolation(repeat: int, order: int = 3) -> None:
     xy = np.column_stack([rng.uniform(0, w - 1, n), rng.uniform(0, h - 1, n)])
     xy = xy[np.lexsort((xy[:, 0], np.floor(xy[:, 1] / 32.0)))]     # bands of rows, as elements
     compiled, twin = ((image_module.COMPILED_KERNEL5, bspline5.evaluate_numpy) if order == 5
-                      else (image_module.COMPILED_KERNEL, image_module._evaluate_numpy))
+                      else (image_module.COMPILED_KERNEL, bspline3.evaluate_numpy))
     print(f"\ninterpolation of {n:,} points in a {w} x {h} image, B-spline order {order} "
           f"(median of {repeat}, load average {os.getloadavg()[0]:.2f}):")
     if compiled:

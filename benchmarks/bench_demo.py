@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from georeg_app.pipeline import default_specs, demo_config, run_methods
-from georeg_app.report import check_claims
+from georeg_app.shape.pipeline import default_specs, demo_config, run_methods
+from georeg_app.report.html import check_claims
 
 
 def main() -> None:

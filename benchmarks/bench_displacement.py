@@ -59,7 +59,7 @@ SCENE = dict(image_size=(800, 600), field_mm=80.0, plate_mm=(76.0, 56.0), mesh_m
 
 
 def _scene():
-    from fesdic_core.render import demo_cameras, flat_plate, speckle_mm_for
+    from fesdic_core.synthetic.render import demo_cameras, flat_plate, speckle_mm_for
     cameras = demo_cameras(image_size=SCENE["image_size"], field_mm=SCENE["field_mm"])
     plate = flat_plate(*SCENE["plate_mm"], speckle_mm=speckle_mm_for(cameras[0], SCENE["speckle_px"]),
                        seed=SCENE["seed"])
@@ -68,22 +68,22 @@ def _scene():
 
 def _model():
     from adapters.fesdic_core import nominal_model
-    from georeg_plugin.geometries import rectangle
+    from georeg_plugin.spline.geometries import rectangle
     return nominal_model(rectangle(*SCENE["mesh_mm"]), SCENE["elements"], "Q9", name="plate")
 
 
 def _images(arrays, tag):
-    from fesdic_core.image import Image
+    from fesdic_core.imaging.image import Image
     return tuple(Image.from_array(a, source=f"{tag} cam{k}") for k, a in enumerate(arrays))
 
 
 def accuracy(levels: int, length_mm: float, jacobian: str = "reference") -> None:
-    from fesdic_core.displacement import (DisplacementSettings, displacement_reference,
+    from fesdic_core.displacement.driver import (DisplacementSettings, displacement_reference,
                                           measure_displacement)
-    from fesdic_core.displacement_strain import surface_green_lagrange
-    from fesdic_core.render import (BendingMotion, RigidMotion, StretchMotion, render_stereo,
+    from fesdic_core.displacement.strain import surface_green_lagrange
+    from fesdic_core.synthetic.render import (BendingMotion, RigidMotion, StretchMotion, render_stereo,
                                     twisted_plate)
-    from georeg_app.track import displacement_solver
+    from georeg_app.series.track import displacement_solver
 
     cameras, plate = _scene()
     model = _model()
@@ -142,12 +142,12 @@ def accuracy(levels: int, length_mm: float, jacobian: str = "reference") -> None
 
 
 def iteration(repeat: int) -> None:
-    from fesdic_core.displacement import displacement_reference, DisplacementSettings
-    from fesdic_core.displacement_residual import (displacement_operators, displacement_residual,
+    from fesdic_core.displacement.driver import displacement_reference, DisplacementSettings
+    from fesdic_core.displacement.residual import (displacement_operators, displacement_residual,
                                                    displacement_rhs)
-    from fesdic_core.mesh import rectangle_mesh
-    from fesdic_core.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
-    from fesdic_core.solvers import CachedFactorization, DirectSolver, sparse_solve
+    from fesdic_core.fe.mesh import rectangle_mesh
+    from fesdic_core.synthetic.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
+    from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, sparse_solve
 
     cams = demo_cameras(image_size=(2448, 2048), stereo_angle_deg=25.0, field_mm=80.0)
     plate = flat_plate(90.0, 75.0, speckle_mm=speckle_mm_for(cams[0], 4.0), seed=1)
@@ -224,7 +224,7 @@ def _stages(jacobian: str, names, iteration, res, repeat: int) -> None:
 def workers(counts, n_frames: int) -> None:
     import cv2
 
-    from fesdic_core.render import RigidMotion, render_stereo
+    from fesdic_core.synthetic.render import RigidMotion, render_stereo
     from georeg_app import cli
 
     cameras, plate = _scene()
@@ -241,8 +241,8 @@ def workers(counts, n_frames: int) -> None:
             noisy = np.clip(np.rint(a + rng.normal(0, 2.0, a.shape)), 0, 255).astype(np.uint8)
             cv2.imwrite(str(folder / "frames" / f"f{i}_cam{k}.png"), noisy)
     model = _model()
-    from fesdic_core.mesh_io import write_mesh
-    from fesdic_core.rig import write_cameras_json
+    from fesdic_core.fe.mesh_io import write_mesh
+    from fesdic_core.cameras.rig import write_cameras_json
     import json
     shape = folder / "shape_out"
     shape.mkdir()

@@ -1,7 +1,7 @@
 """Benchmark: the edge margin (``MeasurementSettings.edge_margin_px``), end to end.
 
 Issue 13 ("lower the floor"). The image model spreads the step at the specimen's edges
-over about two pixels, differently in the two views (:mod:`fesdic_core.edges`). This
+over about two pixels, differently in the two views (:mod:`fesdic_core.residual.edges`). This
 measures what leaving out the points within ``margin`` px of the mesh's projected
 boundary does to the RMS shape error against the true surface, over all nodes and over
 the interior nodes (farther than 3 mm from the plate's edges), on the family of
@@ -32,10 +32,10 @@ import scenes  # noqa: E402
 from shape_truth import bounded_shape_error, rms  # noqa: E402
 
 from adapters.fesdic_core import georeg_solver, nominal_model  # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure  # noqa: E402
-from fesdic_core.image import Image  # noqa: E402
-from fesdic_core.render import render_stereo, speckle_mm_for  # noqa: E402
-from georeg_plugin.geometries import rectangle  # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
+from fesdic_core.imaging.image import Image  # noqa: E402
+from fesdic_core.synthetic.render import render_stereo, speckle_mm_for  # noqa: E402
+from georeg_plugin.spline.geometries import rectangle  # noqa: E402
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""Check: IGES surfaces read by georeg_plugin.iges against gmsh's (OpenCASCADE's) own evaluation.
+"""Check: IGES surfaces read by georeg_plugin.io.iges against gmsh's (OpenCASCADE's) own evaluation.
 
 gmsh builds a B-spline surface (degrees 3 x 2), a rational one (2 x 3, translated), a
 Bezier surface (4 x 3, rotated and translated) and a cylinder converted to NURBS (periodic
@@ -19,7 +19,7 @@ import time
 import gmsh
 import numpy as np
 
-from georeg_plugin.iges import read_iges_surface_entity, read_iges_surfaces
+from georeg_plugin.io.iges import read_iges_surface_entity, read_iges_surfaces
 
 
 def _points(rng) -> dict:

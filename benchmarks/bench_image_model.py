@@ -1,13 +1,13 @@
 """Benchmark: the image model's Gaussian prefilter, end to end, on shapes with a known truth.
 
 Issue 13 ("lower the floor"): the image model is a Gaussian prefilter of ``prefilter_px``
-pixels (sigma) followed by the core's cubic B-spline (:mod:`fesdic_core.image`). This
+pixels (sigma) followed by the core's cubic B-spline (:mod:`fesdic_core.imaging.image`). This
 measures what the prefilter does to the RMS shape error against the true surface
-(:func:`fesdic_core.accuracy.shape_error_to_surface`, through ``georeg_app.pipeline``)
+(:func:`fesdic_core.synthetic.accuracy.shape_error_to_surface`, through ``georeg_app.shape.pipeline``)
 of FE (no regularization), Tikhonov 5 mm and georeg (multiscale, its fixed spline levels: not the level search), and
 to their time:
 
-- ``demo``: the demo of ``georeg demo`` (``georeg_app.pipeline.DEMO``): twisted open-hole
+- ``demo``: the demo of ``georeg demo`` (``georeg_app.shape.pipeline.DEMO``): twisted open-hole
   plate with waviness, 1224 x 816 px, 4 px speckle, 2 gray levels of noise, specimen pose
   perturbed by 0.5 deg / 0.5 mm, calibration, scales (2, 1, 0), 3 spline levels, the
   pipeline's mesh (1024 Q9).
@@ -21,7 +21,7 @@ to their time:
 
 The images are rendered once per scene without noise and without rounding; run ``k``
 (of ``--repeat``) adds the noise of seed ``seed + k`` and rounds to 8 bits exactly as
-:func:`fesdic_core.render.render_stereo` does (run 0 of ``demo`` and ``bump-noise`` are
+:func:`fesdic_core.synthetic.render.render_stereo` does (run 0 of ``demo`` and ``bump-noise`` are
 the images of ``georeg demo`` and of the tests' ``bump_scene``). Errors are the median
 over the runs (over noise realisations; the noise-free case is the same every run),
 times the median of ``Measurement.time_s``; the image model's own cost (prefilter +
@@ -38,7 +38,7 @@ pixels), ``none`` (no prefilter at coarse scales) or ``half`` (sigma / 2 in coar
 pixels, i.e. the fine sigma carried to the coarse grid).
 
 ``--terms`` measures instead the share of two other error terms on the noise-free bump,
-FE on the same mesh and scales through :func:`fesdic_core.driver.measure`: the Riemann
+FE on the same mesh and scales through :func:`fesdic_core.shape.driver.measure`: the Riemann
 sum with one point per pixel against 2 x 2 (``MeasurementSettings(points_per_px=2)``),
 and the brightness normalisation per element against one for the whole region
 (``normalisation="global"``), at each prefilter; full scale only (exact cameras, no
@@ -66,17 +66,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]   # the packages before tests/, whose folders mirror them
 
-from fesdic_core.accuracy import shape_error_to_surface            # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure          # noqa: E402
-from fesdic_core.gauge import move_cameras_with_specimen          # noqa: E402
-from fesdic_core.image import COMPILED_KERNEL, Image                # noqa: E402
-from fesdic_core.mesh import boundary_nodes                         # noqa: E402
-from fesdic_core.render import Specimen, demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
-from fesdic_core.rig import write_cameras_json                      # noqa: E402
-from georeg_app.config import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
+from fesdic_core.synthetic.accuracy import shape_error_to_surface            # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure          # noqa: E402
+from fesdic_core.shape.gauge import move_cameras_with_specimen          # noqa: E402
+from fesdic_core.imaging.image import COMPILED_KERNEL, Image                # noqa: E402
+from fesdic_core.fe.mesh import boundary_nodes                         # noqa: E402
+from fesdic_core.synthetic.render import Specimen, demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.cameras.rig import write_cameras_json                      # noqa: E402
+from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
                                MethodConfig, OutputConfig)
-from georeg_app.methods import default_specs, georeg_spec               # noqa: E402
-from georeg_app.pipeline import DEMO, Truth, build_model, demo_specimen, run_methods  # noqa: E402
+from georeg_app.shape.methods import default_specs, georeg_spec               # noqa: E402
+from georeg_app.shape.pipeline import DEMO, Truth, build_model, demo_specimen, run_methods  # noqa: E402
 from scenes import bump_specimen                                     # noqa: E402
 
 METHODS = ("FE (multiscale)", "Tikhonov 5 mm", "georeg (multiscale)")

@@ -51,7 +51,7 @@ from typing import Callable
 import numpy as np
 from scipy import ndimage, sparse
 
-from fesdic_core.image import COMPILED_KERNEL, Image
+from fesdic_core.imaging.image import COMPILED_KERNEL, Image
 
 BACKGROUND = 10.0            # gray level of the paint between the dots
 AMPLITUDE = 230.0            # saturated dot: background + amplitude = 240

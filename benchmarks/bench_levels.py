@@ -37,7 +37,7 @@ relative to G3), and "search" is the time the search itself reports (``LevelSear
 the predictions, the iterations at finer levels and the final measurement at the chosen
 level) relative to G3. Under a shared machine's load the difference is the noisier one.
 
-Renderers (``--renderer``): ``core`` (fesdic_core.render: ray casting onto z = h(x, y),
+Renderers (``--renderer``): ``core`` (fesdic_core.synthetic.render: ray casting onto z = h(x, y),
 bilinear texture, ``--supersample`` rays per pixel, default the family's 6 x 6) and ``riley`` (riley-raster, PyPI, a Zig
 rasteriser of FE surface meshes for DIC uncertainty studies: the surface as a fine quad9
 mesh with nodes on the truth, element maps inverted by Newton per sub-pixel, Catmull-Rom
@@ -78,20 +78,20 @@ from shape_truth import bounded_shape_error, rms  # noqa: E402
 
 from adapters.fesdic_core import georeg_solver, nominal_model  # noqa: E402
 from adapters.level_search import measure_auto_levels  # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure  # noqa: E402
-from fesdic_core.elements import family_from_meshio, gauss_rule  # noqa: E402
-from fesdic_core.image import Image  # noqa: E402
-from fesdic_core.render import (demo_cameras, render_stereo, speckle_mm_for,  # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
+from fesdic_core.fe.elements import family_from_meshio, gauss_rule  # noqa: E402
+from fesdic_core.imaging.image import Image  # noqa: E402
+from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,  # noqa: E402
                                 speckle_texture, true_normal_offset, twisted_plate)
-from fesdic_core.tikhonov import TikhonovSolver  # noqa: E402
-from fesdic_core.solvers import seen_dofs  # noqa: E402
-from fesdic_core.uncertainty import linearised_state  # noqa: E402
-from georeg_plugin.geometries import plate_with_hole, rectangle  # noqa: E402
+from fesdic_core.solve.tikhonov import TikhonovSolver  # noqa: E402
+from fesdic_core.solve.solvers import seen_dofs  # noqa: E402
+from fesdic_core.shape.uncertainty import linearised_state  # noqa: E402
+from georeg_plugin.spline.geometries import plate_with_hole, rectangle  # noqa: E402
 
 TIKHONOV_MM = (5.0, 10.0, 20.0)
 FIXED_LEVELS = (2, 3, 4)
 START_LEVELS = 3
-DEMO = dict(scenes.SMALL_DEMO, image_size=(1224, 816))     # georeg_app.pipeline.DEMO's scene
+DEMO = dict(scenes.SMALL_DEMO, image_size=(1224, 816))     # georeg_app.shape.pipeline.DEMO's scene
 
 
 @dataclasses.dataclass

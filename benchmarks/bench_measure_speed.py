@@ -3,9 +3,9 @@
 The measurement is the one of ``georeg measure`` with fixed levels: the geometric
 regularization (3 spline levels), image scales (2, 1, 0), calibration of the extrinsics
 (the fixed point of section 2.2) and the end-of-measurement uncertainty
-(:mod:`fesdic_core.uncertainty`). Scenes (rendered once, pixel-area integrated):
+(:mod:`fesdic_core.shape.uncertainty`). Scenes (rendered once, pixel-area integrated):
 
-- ``demo``: the demo's twisted open-hole plate with waviness (georeg_app.pipeline.DEMO),
+- ``demo``: the demo's twisted open-hole plate with waviness (georeg_app.shape.pipeline.DEMO),
   1224 x 816 px, noise of 2 gray levels, poses perturbed by 0.5 deg / 0.5 mm;
 - ``bump``: the shape family at the demo's scale (tests/scenes.py ``FAMILY_DEMO_SCALE``),
   1200 x 1000 px, a 96 x 80 mm plate with a bump of sigma = width / 5, 48 x 40 Q9 elements,
@@ -42,23 +42,25 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]   # the packages before tests/, whose folders mirror them
 
 from adapters.fesdic_core import georeg_solver, nominal_model  # noqa: E402
-from fesdic_core import driver, quadrature, shape, uncertainty  # noqa: E402
-from fesdic_core import calibration, residual  # noqa: E402
-from fesdic_core.accuracy import shape_error_to_surface  # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure  # noqa: E402
-from fesdic_core.image import Image  # noqa: E402
+from fesdic_core.fe import quadrature
+from fesdic_core.shape import driver, operators as shape, uncertainty  # noqa: E402
+from fesdic_core.residual import graylevel as residual
+from fesdic_core.shape import calibration  # noqa: E402
+from fesdic_core.synthetic.accuracy import shape_error_to_surface  # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
+from fesdic_core.imaging.image import Image  # noqa: E402
 
 
 # ----------------------------------------------------------------------------- scenes
 def demo_scene():
-    from georeg_app.pipeline import build_model, demo_config, load_cameras
+    from georeg_app.shape.pipeline import build_model, demo_config, load_cameras
     config, images, truth = demo_config("demo_out")              # nothing is written there
     cameras = load_cameras(config.cameras, images)
     return build_model(config.geometry, 3), images, cameras, truth.specimen
 
 
 def bump_scene():
-    from georeg_plugin.geometries import rectangle
+    from georeg_plugin.spline.geometries import rectangle
     from scenes import FAMILY_DEMO_SCALE, family_scene
     family = FAMILY_DEMO_SCALE
     scene = family_scene(5, family)
@@ -231,7 +233,7 @@ def main() -> None:
     parser.add_argument("--cache", type=Path, default=None,
                         help="folder where the rendered scenes are kept between runs (pickle)")
     args = parser.parse_args()
-    from fesdic_core.image import COMPILED_KERNEL
+    from fesdic_core.imaging.image import COMPILED_KERNEL
     from fesdic_core.parallel import default_threads
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cpus, {default_threads()} threads, python {platform.python_version()}, "

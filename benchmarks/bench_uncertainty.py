@@ -1,7 +1,7 @@
 """Benchmark: the predicted shape uncertainty against Monte Carlo (issue 10, item 3).
 
 Every measurement carries ``shape_std_mm`` (the standard deviation of the shape at each
-node predicted from the image noise, :mod:`fesdic_core.uncertainty`) and ``shape_bias_mm``
+node predicted from the image noise, :mod:`fesdic_core.shape.uncertainty`) and ``shape_bias_mm``
 (the bias indicator: the move one notch less regularization would make). This script
 checks both against many noise draws on ONE rendered stereo pair per scene.
 
@@ -47,7 +47,7 @@ length from the converged state).
 
 What is compared (per scene, method, calibration). ``q_k`` is the shape of seed ``k``;
 with calibration every nodal field below is first taken modulo the rigid normal modes
-(:func:`fesdic_core.gauge.split_rigid_part`, weights :func:`fesdic_core.mesh.nodal_areas`),
+(:func:`fesdic_core.shape.gauge.split_rigid_part`, weights :func:`fesdic_core.fe.mesh.nodal_areas`),
 as the predicted std with calibration is; ``t`` the truth's normal offset at the node.
 
 - ``pred/emp``: median over the nodes of (median over seeds of the predicted std) / (the
@@ -69,7 +69,7 @@ as the predicted std with calibration is; ``t`` the truth's normal offset at the
 - ``err0``: RMS error of the same method on the noise-free pair (um).
 - ``k/k2``: the noise model's ``kappa`` over the ``kappa`` of white noise of exactly the
   added sigma through the same image model (the bootstrap of
-  :func:`fesdic_core.uncertainty.noise_model` with the known sigma): 1 if the residual the
+  :func:`fesdic_core.shape.uncertainty.noise_model` with the known sigma): 1 if the residual the
   FE model leaves is all noise. ``k0/k2``: the noise-free pair's ``kappa`` over the same.
 - ``t s``: wall time per measurement (median; the auto level includes its search).
 
@@ -128,17 +128,17 @@ import numpy as np
 
 from adapters.fesdic_core import nominal_model
 from adapters.level_search import ladder, measure_auto_levels
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.gauge import split_rigid_part
-from fesdic_core.image import Image
-from fesdic_core.mesh import nodal_areas
-from fesdic_core.render import (demo_cameras, render_stereo, speckle_mm_for, true_normal_offset,
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.shape.gauge import split_rigid_part
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import nodal_areas
+from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for, true_normal_offset,
                                 twisted_plate)
-from fesdic_core.shape import current_nodes
-from fesdic_core.tikhonov import TikhonovSolver
-from fesdic_core.uncertainty import noise_model
-from georeg_plugin.geometries import rectangle
-from georeg_plugin.solver import GeometricRegularization
+from fesdic_core.shape.operators import current_nodes
+from fesdic_core.solve.tikhonov import TikhonovSolver
+from fesdic_core.shape.uncertainty import noise_model
+from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.levels.solver import GeometricRegularization
 
 MESH_MM = (60.0, 40.0)
 ELEMENTS = (12, 8)

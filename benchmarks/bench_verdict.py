@@ -5,7 +5,7 @@ One rendered scene (twisted 60 x 40 mm plate, 0.5 mm at the corners, 640 x 480 p
 noise at the true cameras, and the nonsense a user can feed it, calibrating from the
 given cameras: the two images swapped, camera 1 turned by 10 degrees, and images of pure
 noise (refused before any computing). Prints the final residual, the noise floor
-(:mod:`fesdic_core.noise`), their ratio and the verdict (a ratio above 3 fails).
+(:mod:`fesdic_core.imaging.noise`), their ratio and the verdict (a ratio above 3 fails).
 
 Run: ``python benchmarks/bench_verdict.py``
 """
@@ -17,10 +17,10 @@ import platform
 
 import numpy as np
 
-from fesdic_core.driver import MeasurementInputError, MeasurementSettings, measure
-from fesdic_core.image import Image
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+from fesdic_core.shape.driver import MeasurementInputError, MeasurementSettings, measure
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
 
 
 def images_of(specimen, cameras, noise_std: float) -> tuple[Image, Image]:

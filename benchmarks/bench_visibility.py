@@ -1,4 +1,4 @@
-"""Benchmark: the visibility mask (:mod:`fesdic_core.visibility`), its time.
+"""Benchmark: the visibility mask (:mod:`fesdic_core.residual.visibility`), its time.
 
 A corrugated sheet ``z = A sin(2 pi x / wavelength)`` (100 x 100 mm, A = 4 mm, wavelength
 10 mm: slopes up to 68 deg, so the crests hide part of the troughs from the cameras) meshed
@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
-from fesdic_core.mesh import rectangle_mesh  # noqa: E402
-from fesdic_core.quadrature import ElementGroup, PixelQuadrature  # noqa: E402
-from fesdic_core.render import demo_cameras  # noqa: E402
-from fesdic_core.visibility import (DEFAULT_MARGIN_PX, VisibilitySettings,  # noqa: E402
+from fesdic_core.fe.mesh import rectangle_mesh  # noqa: E402
+from fesdic_core.fe.quadrature import ElementGroup, PixelQuadrature  # noqa: E402
+from fesdic_core.synthetic.render import demo_cameras  # noqa: E402
+from fesdic_core.residual.visibility import (DEFAULT_MARGIN_PX, VisibilitySettings,  # noqa: E402
                                     embree_available, median_edge_mm, occluded,
                                     surface_triangles, visibility_mask)
 
@@ -111,8 +111,8 @@ def main() -> None:
 
 def demo(repeat: int) -> None:
     import tempfile
-    from fesdic_core.quadrature import pixel_quadrature
-    from georeg_app.pipeline import DEMO, build_model, demo_config
+    from fesdic_core.fe.quadrature import pixel_quadrature
+    from georeg_app.shape.pipeline import DEMO, build_model, demo_config
     config, _, _ = demo_config(tempfile.mkdtemp())
     mesh = build_model(config.geometry, config.method.fixed_levels).mesh
     cams = demo_cameras(image_size=DEMO["image_size"], stereo_angle_deg=DEMO["stereo_angle_deg"],
@@ -131,9 +131,9 @@ def demo(repeat: int) -> None:
 
 
 def view_angles(tilts=(40.0, 50.0, 55.0, 60.0, 65.0, 70.0)) -> None:
-    from fesdic_core.driver import MeasurementSettings, measure
-    from fesdic_core.image import Image
-    from fesdic_core.render import Specimen, render_stereo, speckle_mm_for, speckle_texture
+    from fesdic_core.shape.driver import MeasurementSettings, measure
+    from fesdic_core.imaging.image import Image
+    from fesdic_core.synthetic.render import Specimen, render_stereo, speckle_mm_for, speckle_texture
     cams = demo_cameras(image_size=(480, 320), field_mm=72.0)
     speckle = speckle_mm_for(cams[0], 4.0)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "

@@ -18,7 +18,7 @@ Cases (synthetic, known truth, the same rendered pair for both codes):
   (``tests/scenes.py`` FAMILY_DEMO_SCALE: a 96 x 80 mm plate, 1200 x 1000 px, 0.1 mm/px,
   two cameras at 25 deg, 4 px speckle): flat, and a 0.5 mm Gaussian bump of sigma 16 mm
   (W/5) and 4 mm (W/20);
-- ``twisted``: the demo's specimen (``georeg_app.pipeline.DEMO``): the 180 x 50 mm open-hole
+- ``twisted``: the demo's specimen (``georeg_app.shape.pipeline.DEMO``): the 180 x 50 mm open-hole
   plate seen over 100 mm, 1 mm twist at the view's corners and a 0.2 mm waviness, images of
   1224 x 816 px (0.09 mm/px);
 
@@ -31,7 +31,7 @@ PNGs cropped from the original frames, 1760 x 1664 px): pyvale with its own exam
 polygon and seeds (``ex10_dic_chal``, shifted by the crop) and the calibration of the data
 (principal points shifted by the crop), against ``examples/dic_challenge``: the specimen
 measured as one part from its CAD, ``georeg measure examples/dic_challenge/specimen_part.toml``
-(in process: ``georeg_app.pipeline.run_methods``; whole process: the command line), and
+(in process: ``georeg_app.shape.pipeline.run_methods``; whole process: the command line), and
 its figures taken by ``analyse_part.py`` (the regions of ``analysis.toml``). No truth
 there: the figures are the flatness of the base plate in the data README's region (RMS to
 the best-fit plane and quadric, pyvale's points selected by their camera-0 subset centre in
@@ -60,7 +60,7 @@ the exact camera 0; ours are the mesh nodes. "points": points delivered (pyvale:
 subset points; ours: mesh nodes, a continuous surface between them). "in-process": median
 wall time of ``--repeat`` interleaved runs of pyvale's ``calculate_3d`` (arrays in memory;
 it writes its result file) and of our measurement (``Image.from_array`` of both images +
-``georeg_app.pipeline.run_methods`` with the method of ``georeg measure``), ``--threads``
+``georeg_app.shape.pipeline.run_methods`` with the method of ``georeg measure``), ``--threads``
 threads each. "whole": median wall time of one full python process per run (pyvale: a
 script reading the PNGs, the calibration CSV and the ROI, running ``calculate_3d`` and
 reading its points back; ours: ``python -m georeg_app measure CONFIG.toml`` writing all its
@@ -107,7 +107,7 @@ def pyvale_calib(cameras):
     """pyvale's ``Calib`` of an exact rig: intrinsics of both cameras and the stereo transform
     ``x1 = R x0 + t``, ``R = Rz(psi) Ry(phi) Rx(theta)`` (its convention, angles in degrees)."""
     from pyvale import calib
-    from fesdic_core.rig import stereo_transform
+    from fesdic_core.cameras.rig import stereo_transform
     R, t = stereo_transform(*cameras)
 
     def intrinsics(c):
@@ -155,7 +155,7 @@ class Case:
     name: str
     specimen: object
     cameras: tuple
-    geometry: object          # georeg_app.config.GeometryConfig: the nominal region
+    geometry: object          # georeg_app.config.measure.GeometryConfig: the nominal region
     noise_seed: int
 
     def inside(self, xy: np.ndarray) -> np.ndarray:
@@ -170,10 +170,10 @@ class Case:
 def build_case(shape: str) -> Case:
     sys.path[:0] = [str(REPO), str(REPO / "tests")]   # the packages before tests/, whose folders mirror them
     import scenes
-    from fesdic_core.render import demo_cameras, speckle_mm_for
-    from georeg_app.config import GeometryConfig
-    from georeg_app.pipeline import DEMO, demo_specimen
-    if shape == "twisted":                                 # as georeg_app.pipeline.demo_config
+    from fesdic_core.synthetic.render import demo_cameras, speckle_mm_for
+    from georeg_app.config.measure import GeometryConfig
+    from georeg_app.shape.pipeline import DEMO, demo_specimen
+    if shape == "twisted":                                 # as georeg_app.shape.pipeline.demo_config
         d = DEMO
         cameras = demo_cameras(image_size=d["image_size"], stereo_angle_deg=d["stereo_angle_deg"],
                                field_mm=d["field_mm"])
@@ -199,7 +199,7 @@ def render(case: Case, renderer: str, supersample: int, cache: Path) -> list:
         return [np.load(f) for f in files]
     t0 = time.perf_counter()
     if renderer == "core":
-        from fesdic_core.render import render_stereo
+        from fesdic_core.synthetic.render import render_stereo
         arrays = render_stereo(case.specimen, case.cameras, supersample=supersample, noise_std=0.0,
                                bit_depth=None, progress=False)
     else:
@@ -227,7 +227,7 @@ def roi_and_seed(case: Case) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """pyvale's ROI (camera-0 pixels seeing the nominal region on z = 0), the same eroded
     by a subset (centres of whole subsets inside it) and a seed where the ROI is deepest."""
     import cv2
-    from fesdic_core.render import pixel_rays
+    from fesdic_core.synthetic.render import pixel_rays
     cam = case.cameras[0]
     w, h = cam.image_size
     y, x = np.mgrid[0:h, 0:w]
@@ -259,7 +259,7 @@ def write_inputs(case: Case, arrays, roi, seed, folder: Path, edge_margin: float
     ``edge_margin_px``, None: the default)."""
     import cv2
     from pyvale import calib
-    from fesdic_core.rig import write_cameras_json
+    from fesdic_core.cameras.rig import write_cameras_json
     folder.mkdir(parents=True, exist_ok=True)
     for k, a in enumerate(arrays):
         cv2.imwrite(str(folder / f"cam{k}.png"), a)
@@ -283,10 +283,10 @@ def write_inputs(case: Case, arrays, roi, seed, folder: Path, edge_margin: float
 def ours(folder: Path, method: str, arrays):
     """``georeg measure``'s work in process: the configuration, the image models of both
     images and the run; returns (measurement or None, seconds, status)."""
-    from fesdic_core.image import Image
-    from georeg_app.config import load_config
-    from georeg_app.methods import measure_specs
-    from georeg_app.pipeline import run_methods
+    from fesdic_core.imaging.image import Image
+    from georeg_app.config.measure import load_config
+    from georeg_app.shape.methods import measure_specs
+    from georeg_app.shape.pipeline import run_methods
     t0 = time.perf_counter()
     config = load_config(folder / f"{method}.toml")
     images = tuple(Image.from_array(np.asarray(a, float), source=f"cam{k}",
@@ -379,10 +379,10 @@ def ours_real(out: Path):
     sys.path.insert(0, str(example))
     import analyse_part
     from challenge.comparison import compare
-    from georeg_app.config import load_config
-    from georeg_app.methods import measure_specs
-    from georeg_app.outputs import write_all
-    from georeg_app.pipeline import run_methods
+    from georeg_app.config.measure import load_config
+    from georeg_app.shape.methods import measure_specs
+    from georeg_app.shape.outputs import write_all
+    from georeg_app.shape.pipeline import run_methods
     config = load_config(example / "specimen_part.toml").with_output_dir(out)
     t0 = time.perf_counter()
     run = run_methods(config, measure_specs(config), progress=False)

@@ -155,7 +155,7 @@ def write_outputs(out: pathlib.Path, m, cam, summary: dict, u_fe: np.ndarray,
     import matplotlib.pyplot as plt
     import meshio
 
-    from georeg_app.outputs import OutputWriter
+    from georeg_app.shape.outputs import OutputWriter
 
     used = used_nodes(m)
     xy_mm = np.asarray(m.n)[:, :2] * 1e3

@@ -35,18 +35,18 @@ import scipy.sparse.linalg as spla
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
 from fesdic_core.atomic import atomic_path
-from fesdic_core.image import Image
-from fesdic_core.mesh import node_normals
-from fesdic_core.quadrature import pixel_quadrature
-from fesdic_core.render import (demo_cameras, render_stereo, speckle_mm_for,
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import node_normals
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,
                                 true_normal_offset, twisted_plate)
-from fesdic_core.residual import gray_level_residual
-from fesdic_core.shape import shape_gauss_newton, shape_operators
-from fesdic_core.solvers import DirectSolver
-from georeg_plugin.geometries import rectangle
-from georeg_plugin.operators import extraction_operator
-from georeg_plugin.refine import refine_to_elements, refine_uniform
-from georeg_plugin.solver import GeometricRegularization
+from fesdic_core.residual.graylevel import gray_level_residual
+from fesdic_core.shape.operators import shape_gauss_newton, shape_operators
+from fesdic_core.solve.solvers import DirectSolver
+from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.levels.operators import extraction_operator
+from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
+from georeg_plugin.levels.solver import GeometricRegularization
 
 LENGTH_MM, WIDTH_MM = 60.0, 40.0      # the plate, centred at the origin, nominal z = 0
 FE_ELEMENTS = (6, 4)                  # Q9 elements along x and y
@@ -277,7 +277,7 @@ def main(argv: list[str] | None = None) -> dict:
     #    solution reaches the lower gray-level residual (117 unknowns also fit the image
     #    noise); the spline solution is the closer one to the true shape.
     # ------------------------------------------------------------------------------
-    print("\n9. Gauss-Newton to convergence, both hooks (fesdic_core.shape.shape_gauss_newton)")
+    print("\n9. Gauss-Newton to convergence, both hooks (fesdic_core.shape.operators.shape_gauss_newton)")
     runs = {}
     for name, solver in (("FE (DirectSolver)", DirectSolver()), ("spline (plugin hook)", hook)):
         run = shape_gauss_newton(mesh.nodes, normals, q0, quad, images, cameras, solver, 0)

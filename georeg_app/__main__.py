@@ -1,6 +1,6 @@
 """``python -m georeg_app``: the ``georeg`` command line."""
 import sys
 
-from .cli import main
+from georeg_app.cli import main
 
 sys.exit(main())

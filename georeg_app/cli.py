@@ -10,10 +10,10 @@
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
 tracebacks on error), ``--version``. An error prints one line ``georeg: error: <message>``
 on stderr and exits with status 1; nothing is written to the output folder then (all
-outputs are staged and published together, see :mod:`georeg_app.outputs`).
+outputs are staged and published together, see :mod:`georeg_app.shape.outputs`).
 
 A measurement that fails its own checks (the residual against the images' noise, an
-unbounded shape, no stagnation; :mod:`fesdic_core.driver`) is an error of ``measure``.
+unbounded shape, no stagnation; :mod:`fesdic_core.shape.driver`) is an error of ``measure``.
 ``compare`` and ``demo`` mark a failed method in summary.json and the report and deliver
 the others; they exit with status 1 only when every method failed. The output folder is
 checked before any computing: it must be a new or empty folder, or ``--overwrite`` is
@@ -31,8 +31,8 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
-from . import installed_version
-from .config import load_config
+from georeg_app import installed_version
+from georeg_app.config.measure import load_config
 
 logger = logging.getLogger(__name__)
 
@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
 #: our packages: their loggers follow --quiet/--verbose (DEBUG under --verbose)
 _OURS = ("georeg_app", "fesdic_core", "georeg_plugin", "adapters", "__main__")
 #: our chatty loggers (e.g. staged file names), shown from this level only, unless --verbose
-_CHATTY = {"fesdic_core.mesh_io": logging.WARNING, "georeg_plugin.spline_io": logging.WARNING}
+_CHATTY = {"fesdic_core.fe.mesh_io": logging.WARNING, "georeg_plugin.io.spline_io": logging.WARNING}
 #: third-party loggers known to flood DEBUG/INFO: kept at WARNING even under --verbose (the
 #: root logger is at WARNING too, so any other third-party logger is quiet as well)
 _THIRD_PARTY = ("matplotlib", "PIL", "numba", "pyxel", "urllib3", "asyncio", "distributed",
@@ -175,14 +175,14 @@ def check_output_folder(out: Path, overwrite: bool) -> None:
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     if args.command == "track":
-        from .track_cli import run_track_command
+        from georeg_app.track_cli import run_track_command
         return run_track_command(args, check_output_folder, progress_enabled(args.quiet))
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
-    from .outputs import REPORT_FILE, summary_dict, write_all
-    from .methods import measure_specs
-    from .pipeline import default_specs, demo_config, run_methods
+    from georeg_app.shape.outputs import REPORT_FILE, summary_dict, write_all
+    from georeg_app.shape.methods import measure_specs
+    from georeg_app.shape.pipeline import default_specs, demo_config, run_methods
 
     progress = progress_enabled(args.quiet)
     images = truth = None

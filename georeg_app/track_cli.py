@@ -14,7 +14,7 @@ import logging
 from pathlib import Path
 from typing import Callable
 
-from .track_config import load_track_config
+from georeg_app.config.track import load_track_config
 
 logger = logging.getLogger(__name__)
 
@@ -38,9 +38,9 @@ def check_scheduler(scheduler: str) -> str:
 def run_track_command(args: argparse.Namespace, check_output_folder: Callable,
                       progress: bool) -> Path:
     """Run ``georeg track``; returns the path of the report written."""
-    from .cli import MeasurementFailed
-    from .track import run_track
-    from .track_outputs import REPORT_FILE, SUMMARY_FILE, write_track
+    from georeg_app.cli import MeasurementFailed
+    from georeg_app.series.track import run_track
+    from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE, write_track
 
     scheduler = check_scheduler(args.scheduler)
     config = load_track_config(args.config)                                   # fail fast

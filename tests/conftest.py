@@ -14,8 +14,8 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 import scenes
-from fesdic_core.image import Image
-from fesdic_core.render import demo_cameras, render_stereo, twisted_plate
+from fesdic_core.imaging.image import Image
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, twisted_plate
 
 
 @pytest.fixture(scope="session")

@@ -4,11 +4,11 @@ import functools
 
 import numpy as np
 
-from fesdic_core.image import Image
-from fesdic_core.render import (Specimen, demo_cameras, render_stereo, speckle_mm_for,
+from fesdic_core.imaging.image import Image
+from fesdic_core.synthetic.render import (Specimen, demo_cameras, render_stereo, speckle_mm_for,
                                 twisted_plate)
 
-#: the demo's scene (georeg_app.pipeline.DEMO) with images of 500 x 333 px instead of
+#: the demo's scene (georeg_app.shape.pipeline.DEMO) with images of 500 x 333 px instead of
 #: 1224 x 816: a 180 x 50 mm plate with a 14 mm hole seen over its central 100 mm, twist
 #: of 1 mm at the corners of the view plus a 0.2 mm waviness (not in any spline level),
 #: two cameras at 25 deg, 4 px speckle, noise of 2 gray levels.
@@ -156,7 +156,7 @@ def _folded_gradient(x, y, slope, bow, width):
 
 def cad_nominal(part: str) -> list:
     """The nominal faces (splines) of a CAD part: "panel" (one NURBS) or "folded" (two faces)."""
-    from georeg_plugin.geometries import cylinder, quadrilateral, transformed
+    from georeg_plugin.spline.geometries import cylinder, quadrilateral, transformed
     p = CAD_PARTS
     if part == "panel":
         length, width = p["panel_mm"]

@@ -1,12 +1,12 @@
 """Shape error against a known surface, modulo SMALL rigid motions (test helper).
 
 The tests' gauge is a pose error of at most 2 degrees and 2 mm, tighter than the library's
-default bound (:func:`fesdic_core.accuracy.shape_error_to_surface`, 5 degrees and 5 % of
+default bound (:func:`fesdic_core.synthetic.accuracy.shape_error_to_surface`, 5 degrees and 5 % of
 the extent): a localized feature of the truth cannot be dodged by the alignment.
 """
 import numpy as np
 
-from fesdic_core.accuracy import shape_error_to_surface
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
 
 
 def bounded_shape_error(points, specimen, max_angle_deg=2.0, max_shift_mm=2.0):

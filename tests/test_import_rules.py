@@ -39,5 +39,5 @@ def test_package_does_not_import_banned_packages(package):
 
 def test_rule_checker_detects_a_violation(tmp_path):
     probe = tmp_path / "probe.py"
-    probe.write_text("import os\nfrom georeg_plugin.operators import x\n")
+    probe.write_text("import os\nfrom georeg_plugin.levels.operators import x\n")
     assert (2, "georeg_plugin") in _imported_roots(probe)

@@ -46,10 +46,10 @@ sys.path.insert(0, str(HERE))
 from challenge import figures as pngs, report                            # noqa: E402
 from challenge.comparison import MeasuredPart, compare, measured_part    # noqa: E402
 from challenge.config import load_analysis                               # noqa: E402
-from fesdic_core.elements import family_from_meshio                      # noqa: E402
-from fesdic_core.image import read_image                                 # noqa: E402
-from fesdic_core.mesh import CellBlock, map_points                       # noqa: E402
-from georeg_app.outputs import OutputWriter                              # noqa: E402
+from fesdic_core.fe.elements import family_from_meshio                      # noqa: E402
+from fesdic_core.imaging.image import read_image                                 # noqa: E402
+from fesdic_core.fe.mesh import CellBlock, map_points                       # noqa: E402
+from georeg_app.shape.outputs import OutputWriter                              # noqa: E402
 
 #: sample points per element along each parent direction (cell centres of a k x k split)
 SAMPLES = 4

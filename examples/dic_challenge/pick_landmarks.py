@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from fesdic_core.rig import read_pyvale_csv
+from fesdic_core.cameras.rig import read_pyvale_csv
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "dic_challenge_stereo"
 

@@ -2,12 +2,12 @@
 
 The real rig (pyvale's calibration posed by the landmarks of ``specimen.toml``) looks at a
 rendered half-cylinder along the vertical bar's axis, speckle of about 7 px, noise of 1.5
-gray levels (:mod:`fesdic_core.render`, ray casting onto ``z = h(x, y)``; the renderer's
+gray levels (:mod:`fesdic_core.synthetic.render`, ray casting onto ``z = h(x, y)``; the renderer's
 Newton does not follow the step from the bar down to the plate, so the plate shows the
 background: only the bar is measured).
 Two true radii are rendered: the laser's 6.38 mm (axis 0.23 mm below the plate) and
 6.23 mm (axis at the plate). Each pair is measured with the package's own pieces
-(:func:`adapters.fesdic_core.nominal_model`, :func:`fesdic_core.driver.measure`, geometric
+(:func:`adapters.fesdic_core.nominal_model`, :func:`fesdic_core.shape.driver.measure`, geometric
 regularization over 3 spline levels, fixed point of calibration and shape, scales 3, 2, 1,
 0; initial pose off by 0.3 mm and 0.1 degree) from two nominals: the exact NURBS cylinder
 of radius 6.38 mm over 80 degrees of arc about the crest (the bar's crest face of the CAD,
@@ -33,15 +33,15 @@ sys.path.insert(0, str(HERE))
 from adapters.fesdic_core import NominalModel, multilevel_for_mesh, nominal_model  # noqa: E402
 from challenge import analysis                                           # noqa: E402
 from challenge.config import Bar, Specimen, load_analysis                # noqa: E402
-from fesdic_core.driver import MeasurementSettings, measure              # noqa: E402
-from fesdic_core.gauge import move_cameras_with_specimen                 # noqa: E402
-from fesdic_core.image import Image, read_image                          # noqa: E402
-from fesdic_core.mesh import node_normals                                # noqa: E402
-from fesdic_core.render import Specimen as Scene, render_stereo, speckle_mm_for  # noqa: E402
-from fesdic_core.rig import initial_rig_pose, read_pyvale_csv, stereo_transform  # noqa: E402
-from georeg_plugin.geometries import cylinder, quadrilateral, transformed  # noqa: E402
-from georeg_plugin.refine import refine_to_elements                      # noqa: E402
-from georeg_plugin.solver import GeometricRegularization                 # noqa: E402
+from fesdic_core.shape.driver import MeasurementSettings, measure              # noqa: E402
+from fesdic_core.shape.gauge import move_cameras_with_specimen                 # noqa: E402
+from fesdic_core.imaging.image import Image, read_image                          # noqa: E402
+from fesdic_core.fe.mesh import node_normals                                # noqa: E402
+from fesdic_core.synthetic.render import Specimen as Scene, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.cameras.rig import initial_rig_pose, read_pyvale_csv, stereo_transform  # noqa: E402
+from georeg_plugin.spline.geometries import cylinder, quadrilateral, transformed  # noqa: E402
+from georeg_plugin.spline.refine import refine_to_elements                      # noqa: E402
+from georeg_plugin.levels.solver import GeometricRegularization                 # noqa: E402
 
 #: window of the stored images around the vertical bar, both views (x0, y0, w, h) px
 WINDOW = (1330, 80, 340, 760)

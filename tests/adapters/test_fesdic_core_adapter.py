@@ -5,14 +5,14 @@ import pytest
 from numpy.testing import assert_allclose
 
 from adapters.fesdic_core import georeg_solver, nominal_model
-from fesdic_core.accuracy import shape_error_to_surface
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.mesh import boundary_nodes, nodal_areas, rectangle_mesh
-from fesdic_core.mesh_io import read_mesh, write_mesh
-from georeg_plugin.fe_mesh import ElementDegreeError
-from georeg_plugin.geometries import plate_with_hole, quadrilateral, rectangle
-from georeg_plugin.operators import multilevel_space, node_parameters
-from georeg_plugin.solver import GeometricRegularization
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.fe.mesh import boundary_nodes, nodal_areas, rectangle_mesh
+from fesdic_core.fe.mesh_io import read_mesh, write_mesh
+from georeg_plugin.spline.fe_mesh import ElementDegreeError
+from georeg_plugin.spline.geometries import plate_with_hole, quadrilateral, rectangle
+from georeg_plugin.levels.operators import multilevel_space, node_parameters
+from georeg_plugin.levels.solver import GeometricRegularization
 
 L, W = 60.0, 40.0
 CORNERS = [[-L / 2, -W / 2, 0.0], [L / 2, -W / 2, 0.0], [L / 2, W / 2, 0.0], [-L / 2, W / 2, 0.0]]
@@ -98,9 +98,9 @@ def test_the_formulation_follows_the_nominal_flat_scalar_curved_vector():
     core's node normals: nested, rigid normal modes in range, and the measured NURBS
     (P_J + d_J) reproduces the nodal field at the nodes."""
     from adapters.fesdic_core import is_curved, measured_spline, multilevel_for_mesh
-    from fesdic_core.mesh import node_normals
-    from georeg_plugin.geometries import cylinder
-    from georeg_plugin.patch import SplinePatch
+    from fesdic_core.fe.mesh import node_normals
+    from georeg_plugin.spline.geometries import cylinder
+    from georeg_plugin.spline.patch import SplinePatch
 
     def rigid_modes(n, X):
         return np.column_stack([n] + [np.einsum("kd,kd->k", n, np.cross(e, X)) for e in np.eye(3)])

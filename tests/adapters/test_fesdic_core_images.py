@@ -11,8 +11,8 @@ import pytest
 
 from adapters.fesdic_core import georeg_solver, nominal_model
 from adapters.level_search import measure_auto_levels
-from fesdic_core.driver import MeasurementSettings, measure
-from georeg_plugin.geometries import plate_with_hole, rectangle
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from georeg_plugin.spline.geometries import plate_with_hole, rectangle
 from shape_truth import bounded_shape_error, rms
 
 

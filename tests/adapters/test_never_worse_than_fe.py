@@ -56,9 +56,9 @@ import pytest
 import scenes
 from adapters.fesdic_core import nominal_model
 from adapters.level_search import measure_auto_levels
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.tikhonov import TikhonovSolver
-from georeg_plugin.geometries import plate_with_hole, rectangle
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.solve.tikhonov import TikhonovSolver
+from georeg_plugin.spline.geometries import plate_with_hole, rectangle
 from shape_truth import bounded_shape_error, rms
 
 TIKHONOV_MM = (5.0, 10.0, 20.0)

@@ -75,7 +75,7 @@ def test_basis_reproduces_the_node_coordinates(typel):
     points, placed by point inversion in pyxel's dof numbering (C^T = R_J(xi_I))."""
     m, _ = roi_mesh(typel)
     patch = adapter.spline_for_mesh(m, margin=3.0, degree=2, elements=(2, 3))
-    from georeg_plugin.operators import multilevel_space
+    from georeg_plugin.levels.operators import multilevel_space
     nodes = np.c_[m.n, np.zeros(len(m.n))]
     C = multilevel_space(patch, 2, nodes).operators[0]
     B = adapter.pyxel_basis(m, C)

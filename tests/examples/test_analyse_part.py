@@ -17,8 +17,8 @@ sys.path.insert(0, str(HERE))
 
 import analyse_part                                                  # noqa: E402
 from challenge.config import ConfigError, load_analysis             # noqa: E402
-from fesdic_core.mesh import SurfaceMesh, rectangle_mesh            # noqa: E402
-from fesdic_core.mesh_io import write_mesh                          # noqa: E402
+from fesdic_core.fe.mesh import SurfaceMesh, rectangle_mesh            # noqa: E402
+from fesdic_core.fe.mesh_io import write_mesh                          # noqa: E402
 
 HEIGHT_MM = 6.30                                 # block top above the plate
 RADII_MM = {"cylinder_h": 6.25, "cylinder_v": 6.20}
@@ -85,7 +85,7 @@ def write_part(folder: Path, faces: dict) -> Path:
         face.append(np.full(m.n_elements, k))
         offset += m.n_nodes
     family = faces[names[0]].blocks[0].family
-    from fesdic_core.mesh import CellBlock
+    from fesdic_core.fe.mesh import CellBlock
     mesh = SurfaceMesh(_moved(np.concatenate(nodes)), (CellBlock(family, np.concatenate(conn)),))
     write_mesh(folder / "georeg.vtu", mesh, cell_data={"face": np.concatenate(face).astype(np.int32)})
     (folder / "summary.json").write_text(json.dumps({"methods": [

@@ -2,7 +2,7 @@
 
 The specimen measured as one part from its CAD through ``georeg measure`` (in process,
 :func:`georeg_app.cli.main`) on the pair downsampled by 2 (the core's pyramid,
-:meth:`fesdic_core.image.Image.coarsen`) with the rig scaled to it (:meth:`Camera.scaled`),
+:meth:`fesdic_core.imaging.image.Image.coarsen`) with the rig scaled to it (:meth:`Camera.scaled`),
 image scales 2, 1, 0 (the full-resolution run's 3, 2, 1) and 2 spline levels (the plate's
 finest 2 x 2 elements; ``specimen_part.toml`` has 4 levels, 8 x 8). With 3 levels, the
 spline the full run uses at its scale 1, the fixed point at the half images' finest scale
@@ -31,11 +31,11 @@ import analyse_part                                                  # noqa: E40
 from challenge import analysis                                       # noqa: E402
 from challenge.comparison import compare                             # noqa: E402
 from challenge.report import LASER, PYVALE                           # noqa: E402
-from fesdic_core.image import read_image                             # noqa: E402
-from fesdic_core.rig import write_cameras_json                       # noqa: E402
+from fesdic_core.imaging.image import read_image                             # noqa: E402
+from fesdic_core.cameras.rig import write_cameras_json                       # noqa: E402
 from georeg_app import cli                                           # noqa: E402
-from georeg_app.config import load_config                            # noqa: E402
-from georeg_app.pipeline import load_cameras                         # noqa: E402
+from georeg_app.config.measure import load_config                            # noqa: E402
+from georeg_app.shape.pipeline import load_cameras                         # noqa: E402
 
 PART = HERE / "specimen_part.toml"
 #: spline levels of the half-resolution part (see the module docstring)

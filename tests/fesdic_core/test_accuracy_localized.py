@@ -6,7 +6,7 @@ as exact when the truth has a bump.
 import numpy as np
 import pytest
 
-from fesdic_core.accuracy import shape_error_to_surface
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from scenes import bump_specimen
 from shape_truth import bounded_shape_error, rms
 

@@ -1,11 +1,12 @@
-"""Tests of the quintic B-spline of the image model (fesdic_core.bspline5): weights, and the
+"""Tests of the quintic B-spline of the image model (fesdic_core.imaging.bspline5): weights, and the
 compiled 6x6 kernel against its numpy twin. Values against scipy's order-5 map_coordinates,
 gradients against finite differences: tests/fesdic_core/test_image.py."""
 import numpy as np
 import pytest
 
-from fesdic_core import bspline5, parallel
-from fesdic_core.image import Image
+from fesdic_core import parallel
+from fesdic_core.imaging import bspline5
+from fesdic_core.imaging.image import Image
 
 
 def test_quintic_weights_are_the_b_spline():

@@ -1,9 +1,9 @@
-"""Tests of the pinhole + distortion camera (fesdic_core.camera) against OpenCV and finite differences."""
+"""Tests of the pinhole + distortion camera (fesdic_core.cameras.camera) against OpenCV and finite differences."""
 import cv2
 import numpy as np
 import pytest
 
-from fesdic_core.camera import Camera
+from fesdic_core.cameras.camera import Camera
 
 # distortion of the DIC-challenge stereo cameras (pyvale calibration), and a milder set
 CHALLENGE_DIST = [0.059449362415370306, 1.5792286900793455, 0.0006657306839709375,

@@ -1,7 +1,7 @@
 """The Levenberg-Marquardt guard: the residual never grows; mu rises tenfold per refusal."""
 from types import SimpleNamespace
 
-from fesdic_core.damping import ACCEPT_RTOL, MU_START, damped_step, relaxed
+from fesdic_core.solve.damping import ACCEPT_RTOL, MU_START, damped_step, relaxed
 
 
 def _proposals(stds):

@@ -2,9 +2,9 @@
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.displacement_solvers import ComponentTikhonovSolver
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.solvers import CachedFactorization
+from fesdic_core.displacement.solvers import ComponentTikhonovSolver
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.solve.solvers import CachedFactorization
 
 
 def _hessian(n, rng):

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fesdic_core.displacement_strain import surface_green_lagrange, tangent_frame
-from fesdic_core.mesh import SurfaceMesh, rectangle_mesh
+from fesdic_core.displacement.strain import surface_green_lagrange, tangent_frame
+from fesdic_core.fe.mesh import SurfaceMesh, rectangle_mesh
 
 
 @pytest.mark.parametrize("recovery", ["patch", "nodal"])

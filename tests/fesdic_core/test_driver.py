@@ -19,12 +19,12 @@ the true camera 1 sees the material point that the estimated camera 0 shows at t
 import numpy as np
 import pytest
 
-from fesdic_core.accuracy import shape_error_to_surface, stereo_correspondence_error
-from fesdic_core.driver import Measurement, MeasurementInputError, MeasurementSettings, measure
-from fesdic_core.gauge import move_cameras_with_specimen
-from fesdic_core.image import Image
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.solvers import DirectSolver
+from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.shape.driver import Measurement, MeasurementInputError, MeasurementSettings, measure
+from fesdic_core.shape.gauge import move_cameras_with_specimen
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.solve.solvers import DirectSolver
 
 MAX_DEVIATION_MM = 0.5
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree
@@ -110,7 +110,7 @@ def test_a_good_measurement_is_consistent_with_the_noise(twisted_scene):
     These images carry no noise (8-bit rounding only): the floor is Immerkaer's estimate of
     the speckle's own fine detail (4.1 gray levels), so the residual has no lower bound
     from it (0.22 of it with the edge margin, 0.3-0.5 before). Leaving out the band along
-    the plate's edges (the edge margin, :mod:`fesdic_core.edges`) lowers the residual: the
+    the plate's edges (the edge margin, :mod:`fesdic_core.residual.edges`) lowers the residual: the
     band held a misfit that no shape explains."""
     _, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, 6, 4, family="Q4")

@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from fesdic_core.camera import Camera
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.edges import boundary_samples, edge_distance_px, edge_margin_mask
-from fesdic_core.image import Image
-from fesdic_core.mesh import boundary_nodes, rectangle_mesh
-from fesdic_core.quadrature import pixel_quadrature
-from fesdic_core.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.residual.edges import boundary_samples, edge_distance_px, edge_margin_mask
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import boundary_nodes, rectangle_mesh
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.synthetic.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
 from shape_truth import bounded_shape_error, rms
 
 F_PX, DEPTH_MM = 800.0, 400.0

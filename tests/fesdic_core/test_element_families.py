@@ -12,17 +12,17 @@ positive nodal areas, below).
 import numpy as np
 import pytest
 
-from fesdic_core.accuracy import shape_error_to_surface
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.gauge import move_cameras_with_specimen
-from fesdic_core.mesh import rectangle_mesh
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.shape.gauge import move_cameras_with_specimen
+from fesdic_core.fe.mesh import rectangle_mesh
 
 MAX_DEVIATION_MM = 0.5
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree
 TRANSLATION = np.array([0.6, -0.48, 0.64])                                # 1 mm
 
 # When calibrating, the gauge (tangential_motions, transfer_rigid_part) is weighed by
-# fesdic_core.mesh.nodal_areas: L^T w is <= 0 at T6 corners (a T6 corner shape function
+# fesdic_core.fe.mesh.nodal_areas: L^T w is <= 0 at T6 corners (a T6 corner shape function
 # integrates to 0) and the gauge refuses such weights.
 
 

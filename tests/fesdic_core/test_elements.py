@@ -1,8 +1,8 @@
-"""Tests of the Lagrange element families (fesdic_core.elements)."""
+"""Tests of the Lagrange element families (fesdic_core.fe.elements)."""
 import numpy as np
 import pytest
 
-from fesdic_core.elements import FAMILIES, centroid, family_from_meshio, gauss_rule
+from fesdic_core.fe.elements import FAMILIES, centroid, family_from_meshio, gauss_rule
 
 NAMES = sorted(FAMILIES)
 

@@ -5,8 +5,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.gauss_newton import damped_gauss_newton, predicted_change
-from fesdic_core.solvers import CachedFactorization, DirectSolver
+from fesdic_core.solve.gauss_newton import damped_gauss_newton, predicted_change
+from fesdic_core.solve.solvers import CachedFactorization, DirectSolver
 
 
 @dataclass(frozen=True)

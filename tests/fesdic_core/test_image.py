@@ -1,12 +1,13 @@
-"""Tests of the gray-level images (fesdic_core.image): spline interpolant, gradient, pyramids, I/O."""
+"""Tests of the gray-level images (fesdic_core.imaging.image): spline interpolant, gradient, pyramids, I/O."""
 import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
 
-from fesdic_core.camera import Camera
-from fesdic_core import image as image_module, parallel
-from fesdic_core.image import DEFAULT_PREFILTER_PX, Image, ImageError, pyramid, read_image
+from fesdic_core.cameras.camera import Camera
+from fesdic_core import parallel
+from fesdic_core.imaging import bspline3, image as image_module
+from fesdic_core.imaging.image import DEFAULT_PREFILTER_PX, Image, ImageError, pyramid, read_image
 
 
 def _random_image(shape=(37, 53), seed=0, prefilter_px=0.0):
@@ -207,7 +208,7 @@ def test_compiled_kernel_equals_its_numpy_twin(shape):
     with parallel.threads(2):                                       # threaded split
         compiled = image.evaluate_with_gradient(xy)
     value, grad = np.empty(len(xy)), np.empty((len(xy), 2))
-    image_module._evaluate_numpy(image._padded, h, w, xy, value, grad)
+    bspline3.evaluate_numpy(image._padded, h, w, xy, value, grad)
     for a, b in zip(compiled, (value, grad)):
         np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * image.dynamic_range, equal_nan=True)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from fesdic_core.image import Image
+from fesdic_core.imaging.image import Image
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SHAPE = (128, 128)

@@ -1,9 +1,9 @@
-"""Tests of the 3-D surface mesh (fesdic_core.mesh)."""
+"""Tests of the 3-D surface mesh (fesdic_core.fe.mesh)."""
 import numpy as np
 import pytest
 
-from fesdic_core.elements import FAMILIES, centroid
-from fesdic_core.mesh import (CellBlock, MeshError, SurfaceMesh, boundary_nodes, edges,
+from fesdic_core.fe.elements import FAMILIES, centroid
+from fesdic_core.fe.mesh import (CellBlock, MeshError, SurfaceMesh, boundary_nodes, edges,
                               element_areas, map_points, node_normals, rectangle_mesh,
                               surface_jacobian, tangents, validate_mesh)
 

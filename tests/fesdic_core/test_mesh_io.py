@@ -1,13 +1,13 @@
-"""Tests of the meshio-based mesh input/output (fesdic_core.mesh_io)."""
+"""Tests of the meshio-based mesh input/output (fesdic_core.fe.mesh_io)."""
 import os
 
 import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.elements import FAMILIES
-from fesdic_core.mesh import CellBlock, SurfaceMesh, element_areas, rectangle_mesh
-from fesdic_core.mesh_io import read_mesh, write_mesh
+from fesdic_core.fe.elements import FAMILIES
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, element_areas, rectangle_mesh
+from fesdic_core.fe.mesh_io import read_mesh, write_mesh
 
 FORMATS = [(".msh", None), (".msh", "gmsh22"), (".vtu", None), (".inp", None), (".vtk", None)]
 

@@ -1,9 +1,9 @@
-"""The noise floor of the residual through the image model's prefilter (fesdic_core.noise)."""
+"""The noise floor of the residual through the image model's prefilter (fesdic_core.imaging.noise)."""
 import numpy as np
 import pytest
 
-from fesdic_core.image import Image
-from fesdic_core.noise import residual_noise_floor
+from fesdic_core.imaging.image import Image
+from fesdic_core.imaging.noise import residual_noise_floor
 
 
 class _PixelCamera:

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from fesdic_core.elements import FAMILIES
-from fesdic_core.mesh import element_areas, rectangle_mesh
-from fesdic_core.quadrature import _subcell_centres, pixel_quadrature, subdivisions
-from fesdic_core.render import demo_cameras
+from fesdic_core.fe.elements import FAMILIES
+from fesdic_core.fe.mesh import element_areas, rectangle_mesh
+from fesdic_core.fe.quadrature import _subcell_centres, pixel_quadrature, subdivisions
+from fesdic_core.synthetic.render import demo_cameras
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import ndimage
 
-from fesdic_core.camera import Camera
-from fesdic_core.render import (
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.synthetic.render import (
     GRAY_RANGE,
     Specimen,
     demo_cameras,

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fesdic_core.render import (BendingMotion, RigidMotion, Specimen, StretchMotion, demo_cameras,
+from fesdic_core.synthetic.render import (BendingMotion, RigidMotion, Specimen, StretchMotion, demo_cameras,
                                 flat_plate, intersect_displaced, pixel_rays, render_stereo,
                                 speckle_texture)
 

@@ -1,4 +1,4 @@
-"""Tests of the stereo rig (fesdic_core.rig): stereo transform, camera files, pyvale text, PnP."""
+"""Tests of the stereo rig (fesdic_core.cameras.rig): stereo transform, camera files, pyvale text, PnP."""
 import json
 from pathlib import Path
 
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from fesdic_core.camera import Camera
-from fesdic_core.rig import (CalibrationError, apply_stereo, initial_pose, initial_rig_pose,
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.cameras.rig import (CalibrationError, apply_stereo, initial_pose, initial_rig_pose,
                              place_camera1, read_cameras_json, read_pyvale_csv,
                              stereo_extrinsic_jacobian, stereo_transform, write_cameras_json)
 

@@ -1,13 +1,13 @@
 import numpy as np
 import pytest
 
-from fesdic_core.mesh import node_normals, rectangle_mesh
-from fesdic_core.quadrature import pixel_quadrature
-from fesdic_core.render import true_normal_offset
-from fesdic_core.residual import gray_level_residual
-from fesdic_core.shape import (GaussNewtonLog, chi_square_change, current_nodes,
+from fesdic_core.fe.mesh import node_normals, rectangle_mesh
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.synthetic.render import true_normal_offset
+from fesdic_core.residual.graylevel import gray_level_residual
+from fesdic_core.shape.operators import (GaussNewtonLog, chi_square_change, current_nodes,
                                predicted_chi_square_change, shape_gauss_newton, shape_operators)
-from fesdic_core.solvers import DirectSolver, StepSolver
+from fesdic_core.solve.solvers import DirectSolver, StepSolver
 
 
 def _objective(q, mesh, normals, quad, images, cameras):

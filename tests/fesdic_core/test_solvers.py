@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from fesdic_core.solvers import (CachedFactorization, DirectSolver, SingularSystemError,
+from fesdic_core.solve.solvers import (CachedFactorization, DirectSolver, SingularSystemError,
                                  sparse_factor, sparse_solve)
 
 

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.tikhonov import TikhonovSolver, surface_gradient_operator, tikhonov_weight
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.solve.tikhonov import TikhonovSolver, surface_gradient_operator, tikhonov_weight
 
 
 @pytest.mark.parametrize("family", ["T3", "T6", "Q4", "Q9"])
@@ -62,7 +62,7 @@ def test_bad_length_is_named():
 # --- one weight per scale (Remark 3), automatic length, noise and bias of a step ----------
 
 try:                                            # the core's noise model, when it is there
-    from fesdic_core.uncertainty import NoiseModel
+    from fesdic_core.shape.uncertainty import NoiseModel
 except ImportError:                             # the solver only reads .variance
     from dataclasses import dataclass
 
@@ -71,7 +71,7 @@ except ImportError:                             # the solver only reads .varianc
         scale: int
         variance: float
 
-from fesdic_core import tikhonov_choice
+from fesdic_core.solve import tikhonov_choice
 
 
 def _spd(n, seed):
@@ -349,7 +349,7 @@ def test_covariance_and_bias_need_a_chosen_scale():
 def test_choice_is_logged_per_scale(caplog):
     mesh, H, b, truth, kappa, _ = _linear_problem(nx=6, ny=4)
     solver = TikhonovSolver(mesh, length_mm="auto")
-    with caplog.at_level("INFO", logger="fesdic_core.tikhonov"):
+    with caplog.at_level("INFO", logger="fesdic_core.solve.tikhonov"):
         for s in (1, 0):
             solver.start_scale(s, NoiseModel(scale=s, variance=kappa))
             solver.solve(H, b, np.zeros(mesh.n_nodes), s)

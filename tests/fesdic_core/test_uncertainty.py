@@ -1,16 +1,16 @@
-"""The shape uncertainty (fesdic_core.uncertainty): linear algebra identities, and the
+"""The shape uncertainty (fesdic_core.shape.uncertainty): linear algebra identities, and the
 predicted standard deviation against the empirical one over noise draws on a render."""
 import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.image import Image
-from fesdic_core.mesh import nodal_areas, rectangle_mesh
-from fesdic_core.gauge import rigid_normal_modes
-from fesdic_core.render import demo_cameras, render_stereo, speckle_mm_for
-from fesdic_core.solvers import DirectSolver, inverse_covariance
-from fesdic_core.uncertainty import shape_std
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import nodal_areas, rectangle_mesh
+from fesdic_core.shape.gauge import rigid_normal_modes
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.solve.solvers import DirectSolver, inverse_covariance
+from fesdic_core.shape.uncertainty import shape_std
 from scenes import bump_specimen
 
 
@@ -31,8 +31,8 @@ def test_inverse_covariance_is_the_inverse():
 
 def test_inverse_diagonal_of_an_fe_matrix_matches_the_dense_inverse():
     """Takahashi's recurrence on the banded (RCM) Cholesky factor of a Q9 mesh's matrix."""
-    from fesdic_core.solvers import inverse_diagonal
-    from fesdic_core.tikhonov import surface_gradient_operator
+    from fesdic_core.solve.solvers import inverse_diagonal
+    from fesdic_core.solve.tikhonov import surface_gradient_operator
     mesh = rectangle_mesh(40.0, 20.0, 10, 5, family="Q9")
     H = sps.csr_matrix(surface_gradient_operator(mesh) + 0.05 * sps.identity(mesh.n_nodes))
     rng = np.random.default_rng(2)
@@ -93,7 +93,7 @@ def test_predicted_std_matches_the_spread_over_noise_draws(noisy_bump_pairs):
 def test_tikhonov_step_covariance_with_the_gauge_projection():
     """shape_std through TikhonovSolver.step_covariance against the dense
     P G H G P^T, G = (H + lam A)^-1 (its weight chosen by a first solve of scale 0)."""
-    from fesdic_core.tikhonov import TikhonovSolver
+    from fesdic_core.solve.tikhonov import TikhonovSolver
     mesh = rectangle_mesh(30.0, 20.0, 4, 3, family="Q9")
     n = mesh.n_nodes
     H, rng = _spd(n, seed=5)

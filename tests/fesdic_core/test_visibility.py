@@ -1,20 +1,20 @@
-"""fesdic_core.visibility: self-occlusion and the grazing-angle cut-off, against analytic
+"""fesdic_core.residual.visibility: self-occlusion and the grazing-angle cut-off, against analytic
 visibility; the driver with visibility on a flat plate (bit-identical) and on a rendered scene
 with an occluder in front of the plate (better than without)."""
 import cv2
 import numpy as np
 import pytest
 
-from fesdic_core.camera import Camera
-from fesdic_core.driver import MeasurementSettings, measure
-from fesdic_core.elements import FAMILIES
-from fesdic_core.image import Image
-from fesdic_core.mesh import CellBlock, SurfaceMesh, rectangle_mesh
-from fesdic_core.quadrature import pixel_quadrature
-from fesdic_core.render import look_at, pixel_rays
-from fesdic_core.solvers import SingularSystemError
-from fesdic_core.tikhonov import TikhonovSolver
-from fesdic_core.visibility import (TOLERANCE_FRACTION, VisibilitySettings, embree_available,
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.fe.elements import FAMILIES
+from fesdic_core.imaging.image import Image
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, rectangle_mesh
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.synthetic.render import look_at, pixel_rays
+from fesdic_core.solve.solvers import SingularSystemError
+from fesdic_core.solve.tikhonov import TikhonovSolver
+from fesdic_core.residual.visibility import (TOLERANCE_FRACTION, VisibilitySettings, embree_available,
                                     median_edge_mm, occluded, point_normals, surface_triangles,
                                     visibility_mask)
 from shape_truth import bounded_shape_error, rms

@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.camera import Camera
-from fesdic_core.gauge import best_fit_plane_distance
-from fesdic_core.mesh import SurfaceMesh, rectangle_mesh
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.shape.gauge import best_fit_plane_distance
+from fesdic_core.fe.mesh import SurfaceMesh, rectangle_mesh
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ class FakeCameras:
 
 @dataclass(frozen=True)
 class FakeConfig:
-    """Sections as dataclasses, like georeg_app.config.Config."""
+    """Sections as dataclasses, like georeg_app.config.measure.Config."""
 
     images: FakeImages
     cameras: FakeCameras
@@ -201,7 +201,7 @@ def fake_run(truth: bool = True, errors=None, with_spline: bool = True,
     errors = errors or {"fe": 0.05, "t5": 0.03, "t10": 0.025, "t20": 0.04, "geo": 0.01, "mono": 0.011}
     spline = None
     if with_spline:
-        from georeg_plugin.geometries import rectangle
+        from georeg_plugin.spline.geometries import rectangle
         spline = rectangle(100.0, 50.0)
     multi_history = multi_history or history(3, 4, 60.0, 2.0, 0.1)
     mono_history = mono_history or history(1, 10, 60.0, 2.0, 0.5)

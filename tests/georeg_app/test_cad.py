@@ -12,15 +12,15 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.elements import family_from_meshio
-from fesdic_core.mesh import CellBlock, SurfaceMesh, boundary_nodes
+from fesdic_core.fe.elements import family_from_meshio
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, boundary_nodes
 from georeg_app import cli
-from georeg_app.config import (CamerasConfig, Config, ConfigError, GeometryConfig, ImagesConfig,
+from georeg_app.config.measure import (CamerasConfig, Config, ConfigError, GeometryConfig, ImagesConfig,
                                MethodConfig, OutputConfig, load_config)
-from georeg_app.methods import MethodSpec, georeg_spec, tikhonov_spec
-from georeg_app.pipeline import Truth, build_model, run_methods
-from georeg_plugin.iges import read_iges_surfaces
-from georeg_plugin.spline_io import read_part_json, write_iges
+from georeg_app.shape.methods import MethodSpec, georeg_spec, tikhonov_spec
+from georeg_app.shape.pipeline import Truth, build_model, run_methods
+from georeg_plugin.io.iges import read_iges_surfaces
+from georeg_plugin.io.spline_io import read_part_json, write_iges
 from scenes import cad_nominal, cad_scene
 from shape_truth import bounded_shape_error, rms
 from user_data import write_user_data
@@ -98,7 +98,7 @@ def _split_folded_nominal(split_y: float = -8.0) -> list:
     """The folded nominal with its left face cut in two along y = ``split_y`` (not a dyadic
     point of the right face's edge): the crease is one edge of the right face against two of
     the left pieces, which split it differently."""
-    from georeg_plugin.geometries import quadrilateral
+    from georeg_plugin.spline.geometries import quadrilateral
     left, right = cad_nominal("folded")
     c = left.evaluate([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])    # corners (u, v)
     t = (split_y - c[0, 1]) / (c[3, 1] - c[0, 1])
@@ -109,10 +109,10 @@ def _split_folded_nominal(split_y: float = -8.0) -> list:
 def test_faces_that_split_the_crease_differently_are_coupled_and_measured_within_5_um(
         parts, monkeypatch):
     """Three faces, the crease shared by one face on one side and two on the other: the
-    common refinement (georeg_plugin.conforming) couples them; georeg measures the part within
+    common refinement (georeg_plugin.spline.conforming) couples them; georeg measures the part within
     5 um of the truth and below FE and Tikhonov. Without the coupling the part is refused,
     naming two faces."""
-    import georeg_app.cad as cad
+    import georeg_app.inputs.cad as cad
     folder, scene = parts["folded"]
     write_iges(folder / "split.igs", _split_folded_nominal(), names=["left_a", "left_b", "right"])
     config = _part_config(folder, "split.igs")
@@ -157,7 +157,7 @@ def test_measure_writes_the_faces_of_the_part(parts, tmp_path):
 def test_cad_inputs_are_checked_naming_the_file_and_the_face(parts, tmp_path, monkeypatch):
     folder, _ = parts["folded"]
     with monkeypatch.context() as m:                          # the base install: no kernel
-        m.setattr("georeg_app.cad.kernel_available", lambda: False)
+        m.setattr("georeg_app.inputs.cad.kernel_available", lambda: False)
         with pytest.raises(ConfigError, match=r"\[geometry\] file: .*part\.step: STEP files need "
                                               r"a CAD kernel: install the optional 'cad' extra"):
             load_config(_config_file(folder, file="part.step"))

@@ -12,12 +12,12 @@ import pytest
 
 pytest.importorskip("OCP")
 
-from georeg_app import cad                                      # noqa: E402
-from georeg_app.cad import (cad_faces, cad_model, cad_part, cad_triangles,  # noqa: E402
+from georeg_app.inputs import cad                                      # noqa: E402
+from georeg_app.inputs.cad import (cad_faces, cad_model, cad_part, cad_triangles,  # noqa: E402
                             read_cad_faces)
-from georeg_plugin.geometries import cylinder                    # noqa: E402
-from georeg_plugin.iges import read_iges_surfaces                # noqa: E402
-from georeg_plugin.spline_io import write_iges                   # noqa: E402
+from georeg_plugin.spline.geometries import cylinder                    # noqa: E402
+from georeg_plugin.io.iges import read_iges_surfaces                # noqa: E402
+from georeg_plugin.io.spline_io import write_iges                   # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "cad"
 PLATE_AREA = 60.0 * 40.0 - np.pi * 8.0 ** 2
@@ -183,7 +183,7 @@ def test_the_whole_cylinder_is_one_part_with_trimmed_discs_and_glued_levels():
     area), the discs (trimmed) keep their elements inside the rim, not welded to the lateral
     face there (the staircase); the spline levels build."""
     from adapters.fesdic_core import multilevel_for_mesh
-    from georeg_app.cad import cad_part, face_refinements
+    from georeg_app.inputs.cad import cad_part, face_refinements
     model = cad_model(DATA / "cylinder.step", None, 300, 2)
     counts = np.bincount(model.element_face)
     lateral = int(np.flatnonzero([f.is_rational for f in model.faces])[0])
@@ -261,7 +261,7 @@ def test_the_faces_not_measured_are_the_occluders():
     """`cad_occluders`: the triangles of the faces the selection leaves out (the cylinder's
     two discs when its lateral face is measured: their area, on two planes 20 mm apart),
     None when every face is measured."""
-    from georeg_app.cad import cad_occluders, read_cad_faces
+    from georeg_app.inputs.cad import cad_occluders, read_cad_faces
     faces = read_cad_faces(DATA / "cylinder.step")
     lateral = next(k for k, f in enumerate(faces) if f.patch.is_rational)
     t = cad_occluders(DATA / "cylinder.step", [lateral])
@@ -274,12 +274,12 @@ def test_the_faces_not_measured_are_the_occluders():
 
 def test_box_with_fillet_is_one_part_welded_everywhere_but_along_the_trimmed_arcs():
     """Its faces split their shared edges differently (the 20 mm side against the 17 mm face
-    beside the fillet, ...): the common refinement (georeg_plugin.conforming) gives them the
+    beside the fillet, ...): the common refinement (georeg_plugin.spline.conforming) gives them the
     same knots, the surfaces unchanged, and the 7 faces mesh as one part (before: refused,
     NonConformingFacesError). The mesh's free edges are only where the trimmed end faces meet
     the fillet along their trimming arc (a staircase, not welded), within two elements of it."""
-    from georeg_plugin.patch import invert_points
-    from fesdic_core.mesh import boundary_nodes
+    from georeg_plugin.spline.patch import invert_points
+    from fesdic_core.fe.mesh import boundary_nodes
     read = read_cad_faces(DATA / "box_fillet.step")
     part = cad_part(DATA / "box_fillet.step")
     for f, g in zip(read, part):

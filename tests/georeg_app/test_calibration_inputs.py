@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 from test_end_to_end import CONFIG, RECTANGLE, case  # noqa: F401  (case: the module fixture)
 
-from fesdic_core.calibration_formats import read_opencv_stereo
-from fesdic_core.rig import read_cameras_json, stereo_transform
+from fesdic_core.cameras.io.formats import read_opencv_stereo
+from fesdic_core.cameras.rig import read_cameras_json, stereo_transform
 
 ROOT = Path(__file__).resolve().parents[2]
 CORNERS = np.array([[x, y, 0.5 * x * y / 600.0] for x in (-25.0, 0.0, 25.0) for y in (-15.0, 15.0)])

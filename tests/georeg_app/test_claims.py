@@ -13,10 +13,12 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.accuracy import shape_error_to_surface
-from georeg_app import cli, pipeline, report
-from georeg_app.config import MethodConfig
-from georeg_app.figures import georeg_pair
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
+from georeg_app import cli
+from georeg_app.report import html as report
+from georeg_app.shape import pipeline
+from georeg_app.config.measure import MethodConfig
+from georeg_app.report.figures import georeg_pair
 from shape_truth import bounded_shape_error, rms
 from user_data import perturbed_pose, write_user_data
 

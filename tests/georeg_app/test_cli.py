@@ -88,9 +88,9 @@ def test_version_and_usage(capsys):
 
 @pytest.fixture
 def fake_pipeline(monkeypatch):
-    """A stand-in ``georeg_app.pipeline`` recording its calls (same names as the contract)."""
+    """A stand-in ``georeg_app.shape.pipeline`` recording its calls (same names as the contract)."""
     calls = {}
-    module = types.ModuleType("georeg_app.pipeline")
+    module = types.ModuleType("georeg_app.shape.pipeline")
     module.MethodSpec = FakeSpec
 
     def default_specs(config):
@@ -107,11 +107,11 @@ def fake_pipeline(monkeypatch):
         return "demo-config", "demo-images", "demo-truth"
 
     module.default_specs, module.run_methods, module.demo_config = default_specs, run_methods, demo_config
-    monkeypatch.setitem(sys.modules, "georeg_app.pipeline", module)
+    monkeypatch.setitem(sys.modules, "georeg_app.shape.pipeline", module)
     monkeypatch.setattr(georeg_app, "pipeline", module, raising=False)
-    monkeypatch.setattr("georeg_app.outputs.make_figures", lambda run: {"convergence": b"\x89PNG"},
+    monkeypatch.setattr("georeg_app.shape.outputs.make_figures", lambda run: {"convergence": b"\x89PNG"},
                         raising=False)
-    monkeypatch.setattr("georeg_app.figures.make_figures", lambda run: {"convergence": b"\x89PNG"})
+    monkeypatch.setattr("georeg_app.report.figures.make_figures", lambda run: {"convergence": b"\x89PNG"})
     return calls
 
 

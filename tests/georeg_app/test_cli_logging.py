@@ -12,9 +12,9 @@ def _emit_all(stream) -> str:
         logging.getLogger(name).debug("third-party debug %s", name)
         logging.getLogger(name).info("third-party info %s", name)
     logging.getLogger(name).warning("third-party warning")
-    logging.getLogger("georeg_app.pipeline").debug("our debug")
-    logging.getLogger("fesdic_core.driver").info("our info")
-    logging.getLogger("fesdic_core.mesh_io").info("chatty info")
+    logging.getLogger("georeg_app.shape.pipeline").debug("our debug")
+    logging.getLogger("fesdic_core.shape.driver").info("our info")
+    logging.getLogger("fesdic_core.fe.mesh_io").info("chatty info")
     return stream.getvalue()
 
 

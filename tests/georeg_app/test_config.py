@@ -1,4 +1,4 @@
-"""georeg_app.config: the TOML schema, its errors (naming the key) and path resolution."""
+"""georeg_app.config.measure: the TOML schema, its errors (naming the key) and path resolution."""
 import re
 import textwrap
 from pathlib import Path
@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from georeg_app import config as config_module
-from georeg_app.config import ConfigError, ConfigFileNotFoundError, load_config
+from georeg_app.config import measure as config_module
+from georeg_app.config.measure import ConfigError, ConfigFileNotFoundError, load_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -86,7 +86,7 @@ def test_single_tikhonov_length_and_default_sections(tmp_path):
 def test_automatic_levels_and_tikhonov_length(tmp_path):
     """levels = "auto" (the default) starts from start_levels fixed levels; "auto" can stand
     among the Tikhonov lengths; the methods of compare follow."""
-    from georeg_app.methods import default_specs
+    from georeg_app.shape.methods import default_specs
     text = GOOD.split("[method]")[0] + ('[method]\nlevels = "auto"\nstart_levels = 2\n'
                                         'tikhonov_length_mm = [5, "auto"]\n')
     c = load_config(_write(tmp_path, text))

@@ -19,8 +19,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from georeg_app.config import GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS, load_config
-from georeg_app.toml_schema import ConfigError
+from georeg_app.config.measure import GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS, load_config
+from georeg_app.config.toml_schema import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "dic_challenge"
 sys.path.insert(0, str(EXAMPLE))

@@ -1,14 +1,14 @@
-"""georeg_app.config: the image model's ``[method] prefilter_px``, ``interpolation_order`` and
+"""georeg_app.config.measure: the image model's ``[method] prefilter_px``, ``interpolation_order`` and
 ``edge_margin_px`` (issue 13) and their checks."""
 import textwrap
 from pathlib import Path
 
 import pytest
 
-from fesdic_core.driver import MeasurementSettings
-from fesdic_core.edges import DEFAULT_EDGE_MARGIN_PX
-from fesdic_core.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX
-from georeg_app.config import ConfigError, MethodConfig, load_config
+from fesdic_core.shape.driver import MeasurementSettings
+from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
+from fesdic_core.imaging.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX
+from georeg_app.config.measure import ConfigError, MethodConfig, load_config
 
 BASE = """
 [images]
@@ -76,7 +76,7 @@ def test_bad_image_model_settings_are_refused_naming_the_key(tmp_path, text, exp
 
 
 def test_the_pipeline_reads_the_images_with_the_configured_prefilter(tmp_path, monkeypatch):
-    from georeg_app import pipeline
+    from georeg_app.shape import pipeline
 
     seen = []
 
@@ -119,10 +119,10 @@ def test_the_pipeline_measures_with_the_configured_edge_margin(tmp_path, monkeyp
     """``[method] edge_margin_px`` reaches the core's settings, for the plain measurement and
     for the level search alike."""
     from adapters.fesdic_core import nominal_model
-    from fesdic_core.driver import MeasurementInputError
-    from georeg_app import pipeline
-    from georeg_app.methods import default_specs
-    from georeg_plugin.geometries import rectangle
+    from fesdic_core.shape.driver import MeasurementInputError
+    from georeg_app.shape import pipeline
+    from georeg_app.shape.methods import default_specs
+    from georeg_plugin.spline.geometries import rectangle
 
     seen = []
 

@@ -1,10 +1,10 @@
-"""georeg_app.config: ``[method] self_occlusion`` and ``max_view_angle_deg`` (issue 11 item 4),
+"""georeg_app.config.measure: ``[method] self_occlusion`` and ``max_view_angle_deg`` (issue 11 item 4),
 their checks, and the core settings the pipeline makes of them."""
 import pytest
 
-from fesdic_core.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG, VisibilitySettings
-from georeg_app.config import ConfigError, MethodConfig
-from georeg_app.run_visibility import visibility_settings
+from fesdic_core.residual.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG, VisibilitySettings
+from georeg_app.config.measure import ConfigError, MethodConfig
+from georeg_app.shape.visibility import visibility_settings
 from test_config_prefilter import _load      # a minimal config with the [method] lines given
 
 
@@ -50,7 +50,7 @@ def test_self_occlusion_is_cast_only_where_something_can_hide_the_surface():
     curved face, a part of several faces, or extra occluders (CAD faces not measured) do."""
     import numpy as np
     from adapters.fesdic_core import nominal_model, part_model
-    from georeg_plugin.geometries import cylinder, quadrilateral, rectangle
+    from georeg_plugin.spline.geometries import cylinder, quadrilateral, rectangle
     method = MethodConfig()
     flat = nominal_model(rectangle(40.0, 30.0), 2, "Q9")
     v = visibility_settings(method, flat)

@@ -1,11 +1,11 @@
-"""georeg_app.pipeline.demo_config: the demo's temporary inputs are removed after the run."""
+"""georeg_app.shape.pipeline.demo_config: the demo's temporary inputs are removed after the run."""
 import gc
 import tempfile
 
 import numpy as np
 
-from fesdic_core.rig import read_cameras_json
-from georeg_app import pipeline
+from fesdic_core.cameras.rig import read_cameras_json
+from georeg_app.shape import pipeline
 
 
 def _cheap_render(specimen, cams, **kwargs):

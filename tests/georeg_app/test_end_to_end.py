@@ -11,9 +11,9 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.accuracy import shape_error_to_surface
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.mesh_io import write_mesh
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.fe.mesh_io import write_mesh
 from georeg_app import cli
 from user_data import write_user_data
 
@@ -186,8 +186,8 @@ def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
 def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsys, monkeypatch):
     """One method breaks inside (its step solver raises a singular system): `georeg compare`
     marks it failed in summary.json and the report, writes the others, and exits 0."""
-    from fesdic_core.solvers import SingularSystemError
-    from georeg_app import pipeline
+    from fesdic_core.solve.solvers import SingularSystemError
+    from georeg_app.shape import pipeline
 
     class Broken:
         def solve(self, H, b, q, scale):

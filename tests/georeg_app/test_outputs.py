@@ -1,4 +1,4 @@
-"""georeg_app.outputs: summary.json schema, atomic writers, all-or-nothing run outputs."""
+"""georeg_app.shape.outputs: summary.json schema, atomic writers, all-or-nothing run outputs."""
 import csv
 import json
 import os
@@ -7,8 +7,8 @@ import meshio
 import numpy as np
 import pytest
 
-from georeg_app import outputs
-from georeg_app.outputs import (OutputWriter, summary_dict, write_all, write_bytes_atomic,
+from georeg_app.shape import outputs
+from georeg_app.shape.outputs import (OutputWriter, summary_dict, write_all, write_bytes_atomic,
                                 write_json_atomic, write_text_atomic)
 from georeg_app_fakes import fake_run
 
@@ -93,7 +93,7 @@ def test_write_all_publishes_every_output(tmp_path):
         np.testing.assert_allclose(mesh.points, result.measurement.nodes)
         np.testing.assert_allclose(mesh.point_data["shape_correction_mm"], result.measurement.q)
         np.testing.assert_allclose(mesh.point_data["distance_to_bfp_mm"], result.distance_to_bfp_mm)
-    from georeg_plugin.spline_io import read_iges, read_scalar_field, read_spline_json
+    from georeg_plugin.io.spline_io import read_iges, read_scalar_field, read_spline_json
     geo = run.results[4]
     patch = read_spline_json(out / "georeg_multiscale_spline.json")
     np.testing.assert_allclose(patch.control_points, geo.spline.control_points)
@@ -172,7 +172,7 @@ def test_published_folder_and_files_are_readable_by_others(tmp_path):
 
 def test_seen_fraction_is_the_share_of_each_element_s_points_in_the_mask():
     from types import SimpleNamespace
-    from georeg_app.outputs import seen_fraction
+    from georeg_app.shape.outputs import seen_fraction
     m = SimpleNamespace(quadrature=SimpleNamespace(element=np.array([0, 0, 1, 1, 1, 3])),
                         residual=SimpleNamespace(mask=np.array([True, False, True, True, False, True])))
     np.testing.assert_allclose(seen_fraction(m, 5), [0.5, 2 / 3, 0.0, 1.0, 0.0])

@@ -1,4 +1,4 @@
-"""georeg_app.report and figures: claims PASS/FAIL on known numbers, self-contained HTML,
+"""georeg_app.report.html and figures: claims PASS/FAIL on known numbers, self-contained HTML,
 failed methods marked and never setting a colour scale, the best method, errors in um,
 error maps with the truth only, claims only where they apply, what produced the report."""
 import base64
@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from georeg_app import figures, maps
-from georeg_app.provenance import config_toml
-from georeg_app.report import check_claims, report_html, time_to_reach
-from georeg_app.run_view import best_method, colour_range, is_failed
+from georeg_app.report import figures, maps
+from georeg_app.report.provenance import config_toml
+from georeg_app.report.html import check_claims, report_html, time_to_reach
+from georeg_app.report.run_view import best_method, colour_range, is_failed
 from georeg_app_fakes import FAILURE, FAKE_INPUTS, fake_run, history
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -196,7 +196,7 @@ def test_header_lists_inputs_with_checksums_config_rig_version():
 
 
 def test_config_toml_reads_back():
-    from georeg_app.config import (CamerasConfig, Config, GeometryConfig, ImagesConfig,
+    from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,
                                    MethodConfig, OutputConfig)
     config = Config(images=ImagesConfig(Path("/d/left.tif"), Path("/d/right.tif")),
                     cameras=CamerasConfig(file=Path("/d/cameras.json")),

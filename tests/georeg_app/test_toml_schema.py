@@ -1,10 +1,10 @@
-"""georeg_app.toml_schema: the shared checked reading of TOML tables."""
+"""georeg_app.config.toml_schema: the shared checked reading of TOML tables."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from georeg_app import toml_schema as ts
+from georeg_app.config import toml_schema as ts
 
 
 def test_table_takes_converts_and_reports_leftovers():

@@ -16,11 +16,11 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.mesh import rectangle_mesh
-from fesdic_core.mesh_io import write_mesh
-from fesdic_core.render import (RigidMotion, StretchMotion, demo_cameras, flat_plate,
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.fe.mesh_io import write_mesh
+from fesdic_core.synthetic.render import (RigidMotion, StretchMotion, demo_cameras, flat_plate,
                                 render_stereo, speckle_mm_for)
-from fesdic_core.rig import write_cameras_json
+from fesdic_core.cameras.rig import write_cameras_json
 from georeg_app import cli
 
 #: the series: two translations (the second with a rotation), pure noise, a stretch
@@ -147,8 +147,8 @@ def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
 
 def _write_halves(folder):
     """The plate as a CAD part: its two halves, IGES faces sharing the edge x = 0."""
-    from georeg_plugin.geometries import quadrilateral
-    from georeg_plugin.spline_io import write_iges
+    from georeg_plugin.spline.geometries import quadrilateral
+    from georeg_plugin.io.spline_io import write_iges
     halves = [quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2)),
               quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))]
     write_iges(folder / "halves.igs", halves, names=["left", "right"])
@@ -321,8 +321,8 @@ def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(
     import dataclasses
     from types import SimpleNamespace
 
-    from georeg_app import track
-    from georeg_app.config import MethodConfig
+    from georeg_app.series import track
+    from georeg_app.config.measure import MethodConfig
 
     seen = []
 

@@ -5,7 +5,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
-from georeg_plugin.bspline import basis_matrix, greville, insertion_matrix, validate_knots
+from georeg_plugin.spline.bspline import basis_matrix, greville, insertion_matrix, validate_knots
 
 
 @st.composite

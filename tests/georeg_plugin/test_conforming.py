@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from georeg_plugin.conforming import conforming_faces
-from georeg_plugin.geometries import quadrilateral
-from georeg_plugin.multipatch import NonConformingFacesError, part_mesh, part_space
-from georeg_plugin.refine import refine_to_elements, refine_uniform
+from georeg_plugin.spline.conforming import conforming_faces
+from georeg_plugin.spline.geometries import quadrilateral
+from georeg_plugin.levels.multipatch import NonConformingFacesError, part_mesh, part_space
+from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
 from test_multipatch import assert_nested_with_rigid_modes
 
 #: a long face A (x 0..40 along the fold y = 0) meeting two faces B (x 0..25) and C (25..40)
@@ -87,7 +87,7 @@ def test_a_circle_touching_a_square_adds_no_knot():
     four points, its breakpoints: touching is not sharing a stretch of edge (the spans next to
     the breakpoints run inside the square), so neither face gets a knot. (Without that test
     the square took C0 lines through the tangent points: cylinder.step's discs did.)"""
-    from georeg_plugin.geometries import cylinder
+    from georeg_plugin.spline.geometries import cylinder
     tube = cylinder(10.0, 5.0, 360.0)                        # axis x, rims at x = -2.5, 2.5
     plate = quadrilateral([[-2.5, -10, -10], [-2.5, 10, -10], [-2.5, 10, 10], [-2.5, -10, 10]])
     out = conforming_faces([plate, tube])

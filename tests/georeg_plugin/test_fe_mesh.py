@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from georeg_plugin.fe_mesh import ElementDegreeError, check_element_degree, fe_mesh_from_spline
-from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
-from georeg_plugin.patch import invert_points
-from georeg_plugin.refine import insert_knots, refine_uniform
+from georeg_plugin.spline.fe_mesh import ElementDegreeError, check_element_degree, fe_mesh_from_spline
+from georeg_plugin.spline.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
+from georeg_plugin.spline.patch import invert_points
+from georeg_plugin.spline.refine import insert_knots, refine_uniform
 
 L, W, R = 100.0, 50.0, 14.0
 # gmsh Q9 reference nodes on [-1, 1]^2: corners ccw, mid-edges 01 12 23 30, centre

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from georeg_plugin.geometries import rectangle
-from georeg_plugin.iges import read_iges_surface_entity, read_iges_surfaces
-from georeg_plugin.patch import SplinePatch
-from georeg_plugin.spline_io import read_iges, write_iges
+from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.io.iges import read_iges_surface_entity, read_iges_surfaces
+from georeg_plugin.spline.patch import SplinePatch
+from georeg_plugin.io.spline_io import read_iges, write_iges
 
 gmsh = pytest.importorskip("gmsh")
 
@@ -58,7 +58,7 @@ def test_gmsh_bspline_rational_and_bezier_surfaces_read_as_gmsh_evaluates_them(
     before = _kernel_surfaces(occ)
     path = tmp_path / "three.igs"
     gmsh.write(str(path))
-    with caplog.at_level(logging.INFO, logger="georeg_plugin.iges"):
+    with caplog.at_level(logging.INFO, logger="georeg_plugin.io.iges"):
         surfaces = read_iges_surfaces(path)
     assert "skipped 61 entities that are not surfaces (type 116 x60, type 402 x1)" \
         in caplog.text

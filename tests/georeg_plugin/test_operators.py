@@ -9,13 +9,13 @@ from numpy.testing import assert_allclose
 from scipy.interpolate import NdBSpline
 from scipy.spatial import Delaunay
 
-from georeg_plugin.fe_mesh import ElementDegreeError, fe_mesh_from_spline
-from georeg_plugin.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
-from georeg_plugin.operators import (NodesOutsidePatchError, extraction_operator,
+from georeg_plugin.spline.fe_mesh import ElementDegreeError, fe_mesh_from_spline
+from georeg_plugin.spline.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
+from georeg_plugin.levels.operators import (NodesOutsidePatchError, extraction_operator,
                                      multilevel_space, node_parameters)
-from georeg_plugin.patch import SplinePatch
-from georeg_plugin.refine import insert_knots, refine_uniform
-from georeg_plugin.solver import GeometricRegularization
+from georeg_plugin.spline.patch import SplinePatch
+from georeg_plugin.spline.refine import insert_knots, refine_uniform
+from georeg_plugin.levels.solver import GeometricRegularization
 
 L, W, R = 100.0, 50.0, 14.0
 Q9_REF = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1],
@@ -188,7 +188,7 @@ def test_node_parameters_rejects_nodes_outside_and_warns_off_surface(caplog):
                       [0.0, W / 2 + 5.0, 0.0], [0.0, 0.0, 0.0]])
     with pytest.raises(NodesOutsidePatchError, match=r"3 of 5 FE nodes.*worst: node 4"):
         node_parameters(patch, nodes)
-    with caplog.at_level(logging.WARNING, logger="georeg_plugin.operators"):
+    with caplog.at_level(logging.WARNING, logger="georeg_plugin.levels.operators"):
         uv, distance = node_parameters(patch, np.array([[30.0, 10.0, 0.5],
                                                         [0.0, 20.0, 0.0]]))
     assert "1 of 2 FE nodes" in caplog.text

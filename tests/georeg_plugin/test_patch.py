@@ -4,9 +4,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from georeg_plugin.bspline import basis_matrix
-from georeg_plugin.geometries import plate_with_hole, rectangle
-from georeg_plugin.patch import SplinePatch, invert_points
+from georeg_plugin.spline.bspline import basis_matrix
+from georeg_plugin.spline.geometries import plate_with_hole, rectangle
+from georeg_plugin.spline.patch import SplinePatch, invert_points
 
 
 def curved_patch(degrees=(2, 3), rational=False, seed=0):

@@ -4,9 +4,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from georeg_plugin.geometries import plate_with_hole
-from georeg_plugin.patch import SplinePatch
-from georeg_plugin.refine import insert_knots, refine_to_elements, refine_uniform
+from georeg_plugin.spline.geometries import plate_with_hole
+from georeg_plugin.spline.patch import SplinePatch
+from georeg_plugin.spline.refine import insert_knots, refine_to_elements, refine_uniform
 
 
 def random_patch(rng, pu, pv, rational):

@@ -1,6 +1,6 @@
 """Eq. 18 for a general H: ``project`` computes ``C_s H C_s^T``, not ``C_s H^T C_s^T``.
 
-Added after a mutation check of georeg_plugin/solver.py: transposing H in the projection
+Added after a mutation check of georeg_plugin/levels/solver.py: transposing H in the projection
 survived every other test, because every H they build is symmetric (Gauss-Newton H, SPD
 random matrices). ``project`` is public and documented as ``C_s H C_s^T`` for any (n_fe, n_fe)
 H; a non-symmetric H tells the two apart.
@@ -9,8 +9,8 @@ import numpy as np
 import scipy.sparse as sps
 from numpy.testing import assert_allclose
 
-from georeg_plugin.operators import MultilevelSpace
-from georeg_plugin.solver import GeometricRegularization
+from georeg_plugin.levels.operators import MultilevelSpace
+from georeg_plugin.levels.solver import GeometricRegularization
 
 
 def test_project_is_c_h_ct_for_a_non_symmetric_h():

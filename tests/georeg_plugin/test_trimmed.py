@@ -3,11 +3,11 @@ keep their (u, v), the part mesh of a trimmed face, grid triangles' area."""
 import numpy as np
 import pytest
 
-from georeg_plugin.fe_mesh import fe_mesh_from_spline
-from georeg_plugin.geometries import cylinder, quadrilateral
-from georeg_plugin.multipatch import part_mesh
-from georeg_plugin.refine import refine_uniform
-from georeg_plugin.trimmed import grid_triangles, inside_loops, trim_mesh
+from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
+from georeg_plugin.spline.geometries import cylinder, quadrilateral
+from georeg_plugin.levels.multipatch import part_mesh
+from georeg_plugin.spline.refine import refine_uniform
+from georeg_plugin.spline.trimmed import grid_triangles, inside_loops, trim_mesh
 
 L, W, R = 60.0, 40.0, 8.0
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from georeg_app.toml_schema import (ConfigError, Table, array, existing_file, load_toml, number,
+from georeg_app.config.toml_schema import (ConfigError, Table, array, existing_file, load_toml, number,
                                     one_of, pair, positive, string, strings, table, table_list)
 
 __all__ = ["ConfigError", "Landmark", "Feature", "Specimen", "Plate", "Bar", "Analysis",
@@ -112,7 +112,7 @@ class Analysis:
 
 
 # --------------------------------------------------------------------------- reading
-# (the generic machinery, one table at a time, is georeg_app.toml_schema's)
+# (the generic machinery, one table at a time, is georeg_app.config.toml_schema's)
 
 def _file(table: Table, key: str, base: Path) -> Path:
     """The required existing file ``key`` (relative to ``base``), resolved."""

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from georeg_app.report import STYLESHEET
+from georeg_app.report.html import STYLESHEET
 
 from .comparison import Comparison, MeasuredPart
 

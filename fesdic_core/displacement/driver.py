@@ -1,0 +1,353 @@
+"""3-D displacement by FE stereo-DIC on the measured reference surface.
+
+The shape measurement (:mod:`fesdic_core.shape.driver`) gives the reference surface (its nodes)
+and the calibrated cameras. A deformed stereo pair is then correlated with the reference
+pair, each camera with itself (:mod:`fesdic_core.displacement.residual`): the unknown is
+the displacement ``U`` (3 per node, node-major dofs), both cameras in one Gauss-Newton.
+
+For each image scale ``s``, coarse to fine (Remark 3; the field of scale ``s`` starts scale
+``s - 1``), Gauss-Newton steps ``(H + mu diag H) d = b`` are solved by the
+:class:`~fesdic_core.solve.solvers.StepSolver` hook (``solve(H, b, U, scale)``: plain FE, Tikhonov
+on each component, a spline level per component), with the Levenberg-Marquardt guard
+of the shape (:mod:`fesdic_core.solve.damping`): the residual never grows. The reference of each
+scale (quadrature, reference gray levels) is computed once (:func:`displacement_reference`)
+and serves every frame of a series.
+
+By default (``jacobian = "reference"``) the Gauss-Newton is the modified one of FE-DIC
+(Besnard, Hild and Roux 2006): the derivative of the residual is taken from the reference
+images at the reference points (:func:`~fesdic_core.displacement.residual.reference_jacobian`),
+so ``H`` of each scale is built once with the reference and factorized once per process
+(:class:`~fesdic_core.solve.solvers.CachedFactorization` over the solver's ``factorize``); an
+iteration is the deformed images' residual, ``b = J^T r`` and a back-substitution. The
+residual, hence the solution, is the full Gauss-Newton's (``jacobian = "current"``: the
+deformed images' derivative at the current state, ``H`` rebuilt at every iteration); only the
+path to it differs (the Jacobian ignores the displacement gradient, the contrast change and the
+change of each camera's projection derivative, all small where DIC works).
+
+A displacement is trusted only if, at the finest scale, the residual is consistent with the
+images' noise, the deformed images show texture, the field stayed bounded and the
+Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
+                                    displacement_operators, displacement_residual,
+                                    displacement_rhs, reference_view)
+from fesdic_core.checks import MeasurementInputError, check_inputs, check_scales
+from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
+from fesdic_core.shape.verdict import judge
+from fesdic_core.imaging.image import Image, pyramid
+from fesdic_core.fe.mesh import SurfaceMesh
+from fesdic_core.imaging.noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.solve.gauss_newton import damped_gauss_newton
+from fesdic_core.shape.operators import GaussNewtonLog
+from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StepSolver
+
+logger = logging.getLogger(__name__)
+
+#: the Jacobian of the displacement's Gauss-Newton: the reference images' (modified
+#: Gauss-Newton, H once per scale) or the deformed images' at the current state (full)
+JACOBIANS = ("reference", "current")
+
+__all__ = ["JACOBIANS", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
+           "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
+           "measure_displacement", "displacement_verdict"]
+
+
+@dataclass(frozen=True)
+class DisplacementSettings:
+    """How to measure a displacement.
+
+    scales : image scales coarse to fine, e.g. (2, 1, 0).
+    tol_mm : stagnation of U at scale 0 (largest component of a step, mm; ``* 2**s`` at s).
+    residual_rtol : at a coarse scale the Gauss-Newton also hands over when the residual
+        falls by less than this fraction in a step (a coarse scale only starts the next).
+    consistency_factor : the final residual may be at most this many times the noise floor.
+    max_shape_fraction : the displacement may reach at most this fraction of the reference
+        surface's diagonal (the name :func:`driver.judge` reads); more is a divergence.
+    jacobian : "reference" (default): the modified Gauss-Newton, the Jacobian of the reference
+        images at the reference points, so ``H`` is built and factorized once per scale and
+        serves every iteration of every frame; "current": the full Gauss-Newton, the
+        deformed images' Jacobian at the current state, ``H`` rebuilt at every iteration.
+        Both minimise the same residual (same solution); only the convergence path differs.
+    """
+
+    scales: tuple[int, ...] = (0,)
+    normalisation: str = "element"
+    max_iter: int = 30
+    tol_mm: float = 1e-4
+    residual_rtol: float = 1e-4
+    max_damping: int = 8
+    points_per_px: float = 1.0
+    consistency_factor: float = CONSISTENCY_FACTOR
+    max_shape_fraction: float = 0.25
+    jacobian: str = "reference"
+
+    def __post_init__(self):
+        # the shape's checks of the scales and the normalisation (ValueError naming them)
+        MeasurementSettings(scales=self.scales, normalisation=self.normalisation)
+        if self.jacobian not in JACOBIANS:
+            raise ValueError(f"jacobian must be one of {JACOBIANS}, got {self.jacobian!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class DisplacementReference:
+    """The reference state of a series: surface, cameras and one :class:`ReferenceView` per
+    scale (coarse to fine, as ``settings.scales``). Built once, shipped once to workers."""
+
+    mesh: SurfaceMesh
+    cameras: tuple
+    images: tuple
+    views: tuple
+    settings: DisplacementSettings
+
+    def view(self, scale: int) -> ReferenceView:
+        for v in self.views:
+            if v.scale == scale:
+                return v
+        raise KeyError(f"no reference view of scale {scale} (scales {self.settings.scales})")
+
+
+def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
+                           settings: DisplacementSettings = DisplacementSettings()
+                           ) -> DisplacementReference:
+    """The reference of a series: ``mesh`` is the reference surface (measured nodes, mm),
+    ``images`` and ``cameras`` the reference stereo pair and its calibrated cameras
+    (full resolution). Raises :class:`MeasurementInputError` for inputs that do not fit."""
+    check_inputs(mesh, images, cameras)
+    check_scales(images, settings.scales)
+    pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
+    views = []
+    for scale in settings.scales:
+        scaled = [c.scaled(scale) for c in cameras]
+        quad = pixel_quadrature(mesh, scaled, settings.points_per_px)
+        normalisation = settings.normalisation if settings.jacobian == "reference" else None
+        views.append(reference_view(quad, mesh.nodes, [p[scale] for p in pyramids], scaled, scale,
+                                    normalisation=normalisation))
+    return DisplacementReference(mesh=mesh, cameras=tuple(cameras), images=tuple(images),
+                                 views=tuple(views), settings=settings)
+
+
+@dataclass(frozen=True)
+class DisplacementGNResult:
+    """End of a displacement Gauss-Newton (as :class:`fesdic_core.shape.operators.ShapeResult`)."""
+
+    U: np.ndarray
+    residual: DisplacementResidual
+    iterations: int
+    converged: bool
+    damping: float = 0.0
+    stop: str = ""
+
+
+def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequence,
+                              solver: StepSolver, normalisation: str = "element",
+                              max_iter: int = 30, tol_mm: float = 1e-4, max_damping: int = 8,
+                              residual_rtol: float | None = None,
+                              log: GaussNewtonLog | None = None,
+                              context: dict | None = None,
+                              jacobian: str = "current") -> DisplacementGNResult:
+    """Minimise both cameras' residual over ``U`` (n, 3) at one scale, steps by ``solver``.
+
+    The loop of the shape (:func:`fesdic_core.solve.gauss_newton.damped_gauss_newton`):
+    Levenberg-Marquardt guard, convergence when the step is below ``tol_mm`` (largest
+    component; the plain step is tested before the images are evaluated at its end), when it
+    changes the fit by less than one unit of chi-square, or when no damped step lowers the
+    residual; ``residual_rtol`` also stops a coarse scale whose residual stagnates.
+
+    ``jacobian``: "current" (full Gauss-Newton: ``H`` and ``b`` from the deformed images'
+    derivative at ``U``, every iteration) or "reference" (modified Gauss-Newton: the view's
+    constant ``H``, the same object at every call so that a :class:`CachedFactorization`
+    solver factorizes it once, and ``b = J^T r`` from :attr:`ReferenceView.dr_du`).
+    """
+    quad, scale = ref.quad, ref.scale
+    if jacobian not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
+    frozen = jacobian == "reference"
+    if frozen and ref.hessian is None:
+        raise ValueError("jacobian = 'reference' needs a reference view with its Jacobian "
+                         "(displacement_reference with DisplacementSettings(jacobian='reference'))")
+
+    def evaluate(U: np.ndarray) -> DisplacementResidual:
+        return displacement_residual(U, ref, images, normalisation, not frozen)
+
+    def operators(res: DisplacementResidual):
+        if frozen:                                   # the same H object at every iteration
+            return ref.hessian, displacement_rhs(quad, ref.dr_du, res.r)
+        return displacement_operators(quad, res)
+
+    def on_step(it: int, std: float, res: DisplacementResidual, step: float, mu: float) -> None:
+        if log is not None:
+            log.add(**(context or {}), scale=scale, stage="displacement", iteration=it,
+                    residual_percent=res.std_percent, step=step, damping=mu,
+                    n_points=res.n_points)
+        logger.debug("displacement GN scale %d it %d: residual %.4f%% -> %.4f%%, max|d| %.2e mm, "
+                     "mu %.1e", scale, it, std, res.std_percent, step, mu)
+
+    U = np.asarray(U0, float).reshape(-1)
+    out = damped_gauss_newton(U, evaluate(U), evaluate, operators,
+                              lambda H, b, U: solver.solve(H, b, U, scale),
+                              lambda res: chi_square(res, quad), tol_mm, max_iter, max_damping,
+                              residual_rtol, on_step, f"displacement GN scale {scale}")
+    return DisplacementGNResult(U=out.q.reshape(-1, 3),
+                                residual=dataclasses.replace(out.residual, dr_du=None),
+                                iterations=out.iterations, converged=out.converged,
+                                damping=out.damping, stop=out.stop)
+
+
+@dataclass(frozen=True)
+class DisplacementMeasurement:
+    """A measured displacement field on the reference surface (world frame, mm).
+
+    ``failure``: None for a trusted field, else one line saying what failed and by how much.
+    ``converged``: no failure and every scale stagnated. ``U`` (n, 3) node-major.
+    """
+
+    U: np.ndarray
+    nodes: np.ndarray
+    residual: DisplacementResidual
+    reference: ReferenceView = field(repr=False)
+    history: tuple = field(repr=False)
+    iterations: int = 0
+    time_s: float = 0.0
+    converged: bool = False
+    noise_percent: float = float("nan")
+    failure: str | None = None
+    scales: tuple = ()
+
+    @property
+    def residual_percent(self) -> float:
+        return self.residual.std_percent
+
+    @property
+    def ok(self) -> bool:
+        return self.failure is None
+
+    def node_residual_percent(self) -> np.ndarray:
+        """(n,) the residual map (:attr:`DisplacementResidual.point_percent`) at the nodes:
+        the shape-function-weighted mean of the seen points (NaN for a node none sees)."""
+        quad = self.reference.quad
+        p = self.residual.point_percent
+        seen = np.isfinite(p)
+        weight = quad.to_nodes(np.where(seen, quad.weight_mm2, 0.0))
+        total = quad.to_nodes(np.where(seen, quad.weight_mm2 * np.nan_to_num(p), 0.0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(weight > 0, total / np.where(weight > 0, weight, 1.0), np.nan)
+
+
+def _noise_floor(ref: ReferenceView, res: DisplacementResidual, images: Sequence):
+    """Per camera, the residual the two images' noise explains (percent of the reference
+    range; :func:`residual_noise_floor` of the pair (reference, deformed) of one camera),
+    pooled over the cameras as the residual is; and the deformed images' texture ratios."""
+    percents, counts, ratios = [], [], []
+    for c in range(2):
+        floor = residual_noise_floor(ref.X, res.mask[c], [ref.images[c], images[c]],
+                                     [ref.cameras[c], ref.cameras[c]])
+        percents.append(floor.percent)
+        counts.append(np.count_nonzero(res.mask[c]))
+        ratios.append(floor.texture_ratio()[1])
+    n = sum(counts)
+    pooled = float(np.sqrt(np.dot(counts, np.square(percents)) / n)) if n else float("nan")
+    return pooled, ratios
+
+
+def displacement_verdict(residual_percent: float, noise_percent: float, U: np.ndarray,
+                         nodes: np.ndarray, texture_ratios: Sequence[float], sources: Sequence[str],
+                         finest: ScaleReport, settings: DisplacementSettings) -> str | None:
+    """Why a displacement cannot be trusted, or None: no texture in a deformed image, a
+    diverged field, then :func:`driver.judge` (residual against the noise floor, stagnation)."""
+    for ratio, source in zip(texture_ratios, sources):
+        if not ratio >= MIN_TEXTURE_RATIO:
+            return (f"{source}: no texture to correlate over the specimen (contrast over noise "
+                    f"{ratio:.3g}, at least {MIN_TEXTURE_RATIO:g} needed): a uniform or "
+                    "pure-noise image, or the wrong image")
+    size = float(np.linalg.norm(np.ptp(nodes, axis=0)))
+    largest = float(np.max(np.linalg.norm(U, axis=1))) if U.size else 0.0
+    if not np.isfinite(largest) or largest > settings.max_shape_fraction * size:
+        return (f"the displacement diverged: {largest:.3g} mm at a node, more than "
+                f"{settings.max_shape_fraction:g} of the surface's size ({size:.3g} mm)")
+    return judge(residual_percent, noise_percent, np.zeros(len(nodes)), nodes, finest, settings)
+
+
+def _check_frame(images: Sequence[Image], reference: DisplacementReference) -> None:
+    if len(images) != 2:
+        raise MeasurementInputError(f"a deformed stereo pair needs 2 images, got {len(images)}")
+    for image, ref_image in zip(images, reference.images):
+        if image.shape != ref_image.shape:
+            raise MeasurementInputError(
+                f"{image.source}: image is {image.shape[1]} x {image.shape[0]} px but the "
+                f"reference {ref_image.source} is {ref_image.shape[1]} x {ref_image.shape[0]} px")
+
+
+def measure_displacement(reference: DisplacementReference, images: Sequence[Image],
+                         solver: StepSolver | None = None, U0: np.ndarray | None = None,
+                         progress: Callable[[int, int, ScaleReport], None] | None = None
+                         ) -> DisplacementMeasurement:
+    """Measure the displacement of the reference surface in the deformed pair ``images``.
+
+    Parameters
+    ----------
+    reference : :func:`displacement_reference` (surface, cameras, reference pair, settings)
+    images : the two deformed full-resolution images (cam0, cam1)
+    solver : the step solver hook on the node-major dofs (default :class:`DirectSolver`)
+    U0 : (n, 3) initial displacement (default 0; the previous frame's in a series)
+    progress : optional ``f(k, n, report)`` called after scale ``k`` of ``n``
+
+    Returns
+    -------
+    DisplacementMeasurement
+        Check :attr:`~DisplacementMeasurement.failure` before trusting it.
+    """
+    _check_frame(images, reference)
+    settings = reference.settings
+    solver = DirectSolver() if solver is None else solver
+    if settings.jacobian == "reference" and not isinstance(solver, CachedFactorization):
+        solver = CachedFactorization(solver)             # H of each scale factorized once
+    n = reference.mesh.n_nodes
+    U = np.zeros((n, 3)) if U0 is None else np.asarray(U0, float).reshape(n, 3).copy()
+    pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
+    log, t0 = GaussNewtonLog(), time.perf_counter()
+    reports, total_iterations, gn, noise_percent, ratios = [], 0, None, float("nan"), [np.inf] * 2
+    for k, scale in enumerate(settings.scales, start=1):
+        view, imgs = reference.view(scale), [p[scale] for p in pyramids]
+        if callable(getattr(solver, "start_scale", None)):      # (not a CachedFactorization)
+            solver.start_scale(scale, None)
+        finest = scale == settings.scales[-1]
+        gn = displacement_gauss_newton(U, view, imgs, solver, settings.normalisation,
+                                       settings.max_iter, settings.tol_mm * 2.0 ** scale,
+                                       settings.max_damping,
+                                       residual_rtol=None if finest else settings.residual_rtol,
+                                       log=log, jacobian=settings.jacobian)
+        U, total_iterations = gn.U, total_iterations + gn.iterations
+        noise_percent, ratios = _noise_floor(view, gn.residual, imgs)
+        report = ScaleReport(scale=scale, residual_percent=gn.residual.std_percent,
+                             noise_percent=noise_percent, fixed_point_iterations=1,
+                             shape_converged=gn.converged, fixed_point_converged=True,
+                             n_points=gn.residual.n_points)
+        reports.append(report)
+        logger.info("displacement scale %d: residual %.3f%% (noise floor %.3f%%), %d iterations, "
+                    "stop: %s", scale, report.residual_percent, noise_percent, gn.iterations,
+                    gn.stop)
+        if progress is not None:
+            progress(k, len(settings.scales), report)
+    failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U,
+                                   reference.mesh.nodes, ratios, [im.source for im in images],
+                                   reports[-1], settings)
+    if failure is not None:
+        logger.info("displacement failed: %s", failure)
+    return DisplacementMeasurement(U=U, nodes=reference.mesh.nodes, residual=gn.residual,
+                                   reference=reference.view(settings.scales[-1]),
+                                   history=tuple(log.records), iterations=total_iterations,
+                                   time_s=time.perf_counter() - t0,
+                                   converged=failure is None and all(r.converged for r in reports),
+                                   noise_percent=noise_percent, failure=failure,
+                                   scales=tuple(reports))

@@ -1,0 +1,97 @@
+"""Step solvers for the displacement's node-major dofs (``3 I + k``).
+
+A scalar nodal operator ``C`` (n_a, n) acts on each displacement component through
+``kron(C, I_3)`` (:func:`componentwise`): the spline operators ``C_s`` of the plugin
+(one spline per component, as the 2-D pyxel adapter does) and the Tikhonov operator ``A``
+of Eq. 10 (:class:`ComponentTikhonovSolver`). The Gauss-Newton of
+:mod:`fesdic_core.displacement.driver` calls ``solve(H, b, U, scale)`` exactly as the shape's.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sps
+
+from fesdic_core.fe.mesh import SurfaceMesh
+from fesdic_core.solve.solvers import sparse_factor, sparse_solve
+from fesdic_core.solve.tikhonov import surface_gradient_operator, tikhonov_weight
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["componentwise", "ComponentTikhonovSolver"]
+
+
+def componentwise(C: sps.spmatrix) -> sps.csr_matrix:
+    """``kron(C, I_3)``: a scalar nodal operator on each of the three components
+    (rows and columns in the node-major layout ``3 I + k``)."""
+    return sps.kron(sps.csr_matrix(C), sps.identity(3, format="csr"), format="csr")
+
+
+class ComponentTikhonovSolver:
+    """Tikhonov regularization (Eq. 10) of each displacement component at one length:
+    ``(H + A3) d = b - A3 U`` with ``A3 = kron(A, diag(lam_x, lam_y, lam_z))``.
+
+    Each component gets its own weight ``lam_k`` from its own block of ``H`` (dofs
+    ``k::3``) by the cosine probe of :func:`~fesdic_core.solve.tikhonov.tikhonov_weight`: the
+    images see the out-of-plane component of a stereo rig several times less than the
+    in-plane ones, so one weight for all three would regularize it at a much longer
+    effective length. One weight per component and image scale, chosen at the scale's
+    first step, the length ``length_mm * 2**s`` at scale ``s`` (as
+    :class:`~fesdic_core.solve.tikhonov.TikhonovSolver`).
+
+    Attributes
+    ----------
+    A3_unit : ``kron(A, I_3)``
+    component_lambdas : dict scale -> (3,) weights
+    """
+
+    def __init__(self, mesh: SurfaceMesh, length_mm: float):
+        if isinstance(length_mm, str) or not (np.isfinite(length_mm) and length_mm > 0):
+            raise ValueError(f"tikhonov_length_mm of a displacement must be a positive number "
+                             f"(mm), got {length_mm!r}")
+        self.length_mm = float(length_mm)
+        self.nodes = np.asarray(mesh.nodes, float)
+        self.A = surface_gradient_operator(mesh)
+        self.A3_unit = componentwise(self.A)
+        self.component_lambdas: dict[int, np.ndarray] = {}
+        self._scale: int | None = None
+
+    def start_scale(self, scale: int, noise=None) -> None:
+        """Mark the start of a scale; a coarser one than the current starts a new pass."""
+        scale = int(scale)
+        if self._scale is not None and scale > self._scale:
+            self.component_lambdas.clear()
+        self._scale = scale
+
+    def operator(self, scale: int) -> sps.csr_matrix:
+        """``A3`` of ``scale`` (its weights must have been chosen)."""
+        return sps.kron(self.A, sps.diags(self.component_lambdas[int(scale)]), format="csr")
+
+    def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        scale = int(scale)
+        self.start_scale(scale)
+        A3 = self._choose(H, scale)
+        return sparse_solve(H + A3, b - A3 @ q, what="H + A3")            # Eq. 10
+
+    def factorize(self, H: sps.spmatrix, scale: int) -> Callable:
+        """``(b, q) -> (H + A3)^-1 (b - A3 q)`` with ``H + A3`` factorized once (the weights
+        of the scale chosen from ``H`` if not yet)."""
+        A3 = self._choose(H, int(scale))
+        solve = sparse_factor(H + A3, what="H + A3")
+        return lambda b, q: solve(b - A3 @ q)                             # Eq. 10
+
+    def _choose(self, H: sps.spmatrix, scale: int) -> sps.csr_matrix:
+        """``A3`` of ``scale``, its weights chosen from ``H`` at the scale's first step."""
+        if scale not in self.component_lambdas:
+            length = self.length_mm * 2.0 ** scale                       # Remark 3
+            H = sps.csr_matrix(H)
+            self.component_lambdas[scale] = np.array(
+                [tikhonov_weight(H[k::3, k::3], self.A, self.nodes, length) for k in range(3)])
+            logger.info("tikhonov (per component) scale %d: length %.4g mm, lambda %s", scale,
+                        length, np.array2string(self.component_lambdas[scale], precision=4))
+        return self.operator(scale)
+
+    def __repr__(self) -> str:
+        return f"ComponentTikhonovSolver(length_mm={self.length_mm!r})"

@@ -1,0 +1,1 @@
+"""Synthetic scaffolding: a stereo renderer with a known surface and accuracy against that truth."""

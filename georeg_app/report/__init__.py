@@ -1,0 +1,1 @@
+"""Figures and the self-contained HTML reports of a run and of a series."""

@@ -1,0 +1,1 @@
+"""``georeg track``: a displacement field per deformed stereo pair, serially or on Dask, and its output files."""

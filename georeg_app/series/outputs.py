@@ -1,0 +1,106 @@
+"""Output files of ``georeg track``, all published together (:class:`OutputWriter`).
+
+- ``frame_NNNN.vtu`` per frame (NNNN = frame index, the reference being frame 0): the
+  reference surface (mm, world frame) with point data ``displacement_mm`` (3),
+  ``residual`` (percent of the reference images' dynamic range, root mean square of the two
+  cameras at the nodes), ``strain_xx``, ``strain_yy``, ``strain_xy`` (surface Green-Lagrange
+  in the local tangent frame, :mod:`fesdic_core.displacement.strain`). A frame that failed
+  its checks is written as ``frame_NNNN_failed.vtu`` (its untrusted field) and left out of
+  the time series.
+- ``displacement.pvd``: the ParaView time series of the frames that succeeded (time = frame
+  index).
+- ``summary.json``: :func:`track_summary`.
+- ``report.html``: :mod:`georeg_app.report.track`.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from fesdic_core.fe.mesh_io import write_mesh
+
+from georeg_app.shape.outputs import OutputWriter, _json_ready
+from georeg_app.report.track import REPORT_FILE, track_report_html
+
+__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "frame_file", "track_summary", "pvd_text", "write_track"]
+
+SUMMARY_FILE = "summary.json"
+PVD_FILE = "displacement.pvd"
+
+
+def frame_file(frame) -> str | None:
+    """The VTU of a frame (None for a frame that raised before giving a field)."""
+    if frame.U is None:
+        return None
+    return f"frame_{frame.index:04d}" + ("" if frame.ok else "_failed") + ".vtu"
+
+
+def _finite(value) -> float | None:
+    return float(value) if value is not None and np.isfinite(value) else None
+
+
+def track_summary(run) -> dict:
+    """``summary.json``: ``{"reference", "displacement", "scheduler", "time_s",
+    "failed_frames": [index], "frames": [{"index", "cam0", "cam1", "residual_percent",
+    "iterations", "converged", "time_s", "mesh_file", "status", "failure", "noise_percent",
+    "start_frame", "mean_displacement_mm", "max_displacement_mm"}]}``; ``status`` is "ok" or
+    "failed" (``failure`` says why); ``start_frame``: the frame whose field started this one
+    (0: from rest)."""
+    frames = []
+    for f in run.frames:
+        frames.append({
+            "index": f.index, "cam0": f.cam0, "cam1": f.cam1,
+            "residual_percent": _finite(f.residual_percent), "iterations": int(f.iterations),
+            "converged": bool(f.converged), "time_s": float(f.time_s), "mesh_file": frame_file(f),
+            "status": "ok" if f.ok else "failed", "failure": f.failure,
+            "noise_percent": _finite(f.noise_percent), "start_frame": int(f.start_frame),
+            "mean_displacement_mm": None if f.U is None else np.mean(f.U, axis=0),
+            "max_displacement_mm": None if f.U is None else float(np.max(np.linalg.norm(f.U, axis=1))),
+        })
+    d = run.config.displacement
+    return _json_ready({
+        "reference": run.reference_label,
+        "displacement": {"method": d.method, "scales": list(d.scale_sequence),
+                         "incremental": d.incremental,
+                         "tikhonov_length_mm": d.tikhonov_length_mm if d.method == "tikhonov" else None,
+                         "levels": d.levels if d.method == "georeg" else None,
+                         "jacobian": d.jacobian},
+        "n_nodes": int(run.mesh.n_nodes), "scheduler": run.scheduler, "time_s": float(run.time_s),
+        "failed_frames": [f.index for f in run.frames if not f.ok],
+        "frames": frames,
+    })
+
+
+def pvd_text(run) -> str:
+    """The ParaView collection of the frames that succeeded."""
+    rows = "".join(f'    <DataSet timestep="{f.index}" part="0" file={quoteattr(frame_file(f))}/>\n'
+                   for f in run.frames if f.ok)
+    return ('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+            f"{rows}  </Collection>\n</VTKFile>\n")
+
+
+def write_frame_vtu(path: str | os.PathLike, mesh, frame, element_face=None) -> None:
+    """One frame's VTU: displacement, residual and strain per node; for a CAD part of
+    several faces the cell data ``face`` (as ``georeg measure``'s VTU)."""
+    write_mesh(path, mesh, point_data={
+        "displacement_mm": np.asarray(frame.U, float),
+        "residual": np.asarray(frame.residual_node, float),
+        "strain_xx": frame.strain[:, 0], "strain_yy": frame.strain[:, 1],
+        "strain_xy": frame.strain[:, 2]},
+        cell_data=None if element_face is None else {"face": np.asarray(element_face, np.int32)})
+
+
+def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> list[Path]:
+    """Write every output of ``run`` into ``out_dir`` (all or nothing)."""
+    with OutputWriter(out_dir, replace=overwrite) as w:
+        for frame in run.frames:
+            name = frame_file(frame)
+            if name is not None:
+                write_frame_vtu(w.path(name), run.mesh, frame, run.element_face)
+        w.write_text(PVD_FILE, pvd_text(run))
+        w.write_json(SUMMARY_FILE, track_summary(run))
+        w.write_text(REPORT_FILE, track_report_html(run))
+    return w.published

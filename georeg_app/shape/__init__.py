@@ -1,0 +1,1 @@
+"""``georeg measure`` and ``georeg compare``: the methods of a run, the run and its output files."""

@@ -1,0 +1,267 @@
+"""The solve hook of the geometric regularization, Eqs. 18-21.
+
+At each Gauss-Newton step the host FE-DIC code assembles ``H_FE`` and ``b_FE`` in the
+normal-projected nodal unknown ``q`` (Eq. 8 + Remark 1) and asks for a step ``d``.
+Instead of the ill-posed ``H_FE d = b_FE`` the plugin solves the same problem in the
+spline space of level ``s``:
+
+    H_IG = C_s H_FE C_s^T,   b_IG = C_s b_FE          (Eqs. 18-20)
+    d_IG = H_IG^-1 b_IG,     d = C_s^T d_IG           (Eq. 21)
+
+``GeometricRegularization`` duck-types the core's ``StepSolver`` protocol
+(``solve(H, b, q, scale) -> d``); it holds only the (immutable) multilevel space and
+the schedule image scale -> spline level, so it is stateless: the spline control
+values of the current shape are recovered from ``q`` by ``control_values``.
+
+A spline dof that no integration point sees (its support lies in a hole of a legacy
+mesh, or in a region masked in the images) makes ``C_s H C_s^T`` singular: by default
+this is an error naming the dof; with ``hold_unseen=True`` such dofs (zero diagonal
+term) keep their value and the step is solved for the others.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Mapping
+
+import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from georeg_plugin.levels.operators import MultilevelSpace
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["GeometricRegularization", "SingularProjectionError"]
+
+#: relative size below which a diagonal term of a projected matrix counts as zero
+_ZERO_PIVOT = 1e-12
+
+
+class SingularProjectionError(np.linalg.LinAlgError):
+    """The projected system ``C_s H C_s^T`` (or ``C_s C_s^T``) is singular.
+
+    A subclass of ``numpy.linalg.LinAlgError`` (hence of ``ValueError``).
+    """
+
+
+def _sparse_solve(A: sps.spmatrix, b: np.ndarray, level: int, what: str,
+                  hint: str) -> np.ndarray:
+    """Sparse direct solve of ``A x = b`` (A symmetric, (m, m)) with clear failures.
+
+    A zero diagonal term names the spline dof that nothing constrains; a singular
+    factorisation or a non-finite solution names the level.
+    """
+    return _sparse_factor(A, level, what, hint)(b)
+
+
+def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint: str):
+    """The map ``b -> A^-1 b`` of :func:`_sparse_solve`, ``A`` factorized once."""
+    A = sps.csc_matrix(A)
+    diag = A.diagonal()
+    scale = float(np.max(np.abs(diag))) if diag.size else 0.0
+    dead = np.flatnonzero(np.abs(diag) <= _ZERO_PIVOT * scale) if scale > 0 else \
+        np.arange(diag.size)
+    if dead.size:
+        raise SingularProjectionError(
+            f"{what} of spline level {level} is singular: {dead.size} of {diag.size} "
+            f"spline dofs have a zero diagonal term (first: dof {int(dead[0])}); "
+            f"{hint.format(dof=int(dead[0]))}")
+    advice = ("the spline level is too fine for the data (rank deficiency): use a "
+              "coarser level at this scale")
+    try:
+        lu = spla.splu(A)
+    except RuntimeError as exc:  # "Factor is exactly singular"
+        raise SingularProjectionError(
+            f"{what} of spline level {level} ({A.shape[0]} dofs) is singular ({exc}); "
+            f"{advice}") from exc
+    pivots = np.abs(lu.U.diagonal())
+    k = int(np.argmin(pivots))
+    if pivots[k] <= _ZERO_PIVOT * pivots.max():
+        dof = int(lu.perm_c[k])
+        raise SingularProjectionError(
+            f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
+            f"singular (pivot ratio {pivots[k] / pivots.max():.1e} at spline dof {dof}; "
+            f"{hint.format(dof=dof)}?); {advice}")
+
+    def solve(b: np.ndarray) -> np.ndarray:
+        x = lu.solve(np.asarray(b, dtype=float))
+        if not np.all(np.isfinite(x)):
+            raise SingularProjectionError(
+                f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
+                "singular (non-finite solution): use a coarser level at this scale")
+        return x
+    return solve
+
+
+def _seen_dofs(A: sps.spmatrix) -> np.ndarray:
+    diag = np.abs(A.diagonal())
+    return diag > _ZERO_PIVOT * (diag.max() if diag.size else 0.0)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class GeometricRegularization:
+    """Multilevel spline regularization of a Gauss-Newton step (Eqs. 18-21).
+
+    Parameters
+    ----------
+    space : MultilevelSpace
+        The spline levels and their operators ``C_s`` (csr, (n_spline_s, n_fe)),
+        ``s = 0`` the finest (Eq. 28).
+    schedule : mapping image scale -> spline level, optional
+        Default ``level = min(scale, n_levels - 1)``: the coarsest images use the
+        coarsest splines (Fig. 5).
+    hold_unseen : bool
+        Keep the dofs with a zero diagonal term of ``C_s H C_s^T`` (seen by no
+        integration point) fixed instead of raising :class:`SingularProjectionError`.
+    """
+
+    space: "MultilevelSpace"
+    schedule: Mapping[int, int] | None = None
+    hold_unseen: bool = False
+
+    def __post_init__(self) -> None:
+        n_levels = len(self.space.operators)
+        if n_levels == 0:
+            raise ValueError("space: a MultilevelSpace with at least one operator is needed")
+        if self.schedule is not None:
+            bad = {k: v for k, v in self.schedule.items()
+                   if not (0 <= int(v) < n_levels) or int(k) < 0}
+            if bad:
+                raise ValueError(f"schedule: levels must be in [0, {n_levels - 1}] and "
+                                 f"scales >= 0, got {bad}")
+            object.__setattr__(self, "schedule", MappingProxyType(
+                {int(k): int(v) for k, v in self.schedule.items()}))
+        # C_s^T once, as csr: the projection H C_s^T runs at every Gauss-Newton step
+        object.__setattr__(self, "_transposed", tuple(sps.csr_matrix(C.T) for C in
+                                                      self.space.operators))
+
+    @property
+    def n_levels(self) -> int:
+        """Number of spline levels."""
+        return len(self.space.operators)
+
+    def level(self, scale: int) -> int:
+        """Spline level used at image scale ``scale`` (0 = finest images)."""
+        if scale < 0:
+            raise ValueError(f"scale must be >= 0, got {scale}")
+        if self.schedule is None:
+            return min(int(scale), self.n_levels - 1)
+        if scale not in self.schedule:
+            raise ValueError(f"scale {scale} is not in the schedule {dict(self.schedule)}")
+        return self.schedule[scale]
+
+    def operator(self, level: int) -> sps.csr_matrix:
+        """``C_s`` of a level, csr (n_spline_s, n_fe)."""
+        if not 0 <= level < self.n_levels:
+            raise ValueError(f"level must be in [0, {self.n_levels - 1}], got {level}")
+        return self.space.operators[level]
+
+    def project(self, H, b: np.ndarray, level: int) -> tuple[sps.csr_matrix, np.ndarray]:
+        """Spline operators of a level from the FE ones.
+
+        Parameters
+        ----------
+        H : sparse or dense (n_fe, n_fe); b : (n_fe,)
+
+        Returns
+        -------
+        H_s : csr (m, m), ``C_s H C_s^T`` (Eqs. 18, 20)
+        b_s : (m,), ``C_s b`` (Eqs. 19, 20)
+        """
+        C = self.operator(level)
+        b = np.asarray(b, dtype=float)
+        if H.shape != (C.shape[1], C.shape[1]) or b.shape != (C.shape[1],):
+            raise ValueError(f"H {H.shape} and b {b.shape} do not match the {C.shape[1]} "
+                             f"FE nodes of spline level {level}")
+        H_s = sps.csr_matrix(C @ (sps.csr_matrix(H) @ self._transposed[level]))  # Eq. 18
+        b_s = C @ b  # Eq. 19
+        return H_s, b_s
+
+    def solve(self, H, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        """Regularized step ``d = C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21), (n_fe,).
+
+        ``q`` (the current nodal shape) is not needed: the step is linear in ``b``.
+        """
+        return self.factorize(H, scale)(b, q)
+
+    def factorize(self, H, scale: int):
+        """The step's map ``(b, q) -> C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21) with
+        ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change."""
+        s = self.level(scale)
+        C, CT = self.operator(s), self._transposed[s]
+        H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
+        seen = np.ones(H_s.shape[0], dtype=bool)
+        if self.hold_unseen:                                   # dofs no point sees keep their value
+            seen = _seen_dofs(H_s)
+            if not seen.all():
+                logger.debug("level %d: %d of %d spline dofs unseen, held", s,
+                             np.count_nonzero(~seen), seen.size)
+                H_s = H_s[seen][:, seen]
+        solve = _sparse_factor(H_s, s, "projected Hessian C_s H C_s^T",
+                               "no integration point sees spline dof {dof}") \
+            if seen.any() else None
+        logger.debug("scale %d -> spline level %d: %d dofs", scale, s, seen.size)
+
+        def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
+            b = np.asarray(b, dtype=float)
+            if b.shape != (C.shape[1],):
+                raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
+                                 f"spline level {s}")
+            b_s = C @ b                                                # Eq. 19
+            d_s = np.zeros(seen.size)
+            if solve is not None:
+                d_s[seen] = solve(b_s[seen])
+            return CT @ d_s                                            # Eq. 21
+        return step
+
+    def step_covariance(self, H, scale: int):
+        """Covariance of the step per unit noise, ``C_s^T (C_s H C_s^T)^-1 C_s`` (Eq. 21 applied
+        to ``Cov(b) = H``): its diagonal (n_fe,) and its action ``V (n_fe, k) -> C V``."""
+        s = self.level(scale)
+        C, CT = self.operator(s), self._transposed[s]
+        H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
+        seen = _seen_dofs(H_s) if self.hold_unseen else np.ones(H_s.shape[0], dtype=bool)
+        M = np.zeros(H_s.shape)
+        M[np.ix_(seen, seen)] = np.linalg.inv(H_s[seen][:, seen].toarray())   # m x m, m small
+        CT_M = np.asarray(CT @ M)                                               # (n_fe, m)
+        diag = np.asarray(CT.multiply(CT_M).sum(axis=1)).ravel()                # rows of C^T M C
+        return diag, lambda V: CT_M @ (C @ np.asarray(V, dtype=float))
+
+    def bias_step(self, H, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        """The bias indicator: the step of the next finer spline level from the current state,
+        ``C_{s-1}^T (C_{s-1} H C_{s-1}^T)^-1 C_{s-1} b`` (Eqs. 18-21), (n_fe,). At the finest
+        level (``s = 0``) it is the unregularized step ``H^-1 b`` over the dofs a point sees."""
+        s = self.level(scale)
+        if s > 0:
+            finer = dataclasses.replace(self, schedule={scale: s - 1})
+            return finer.solve(H, b, q, scale)
+        H = sps.csr_matrix(H)
+        seen = _seen_dofs(H)
+        d = np.zeros(H.shape[0])
+        if seen.any():
+            d[seen] = spla.spsolve(sps.csc_matrix(H[seen][:, seen]), np.asarray(b, float)[seen])
+        return d
+
+    def control_values(self, q: np.ndarray, level: int) -> np.ndarray:
+        """Least-squares spline control values of a nodal field, (n_spline_s,).
+
+        Solves ``min |C_s^T q_s - q|`` by the normal equations
+        ``C_s C_s^T q_s = C_s q``; exact when ``q`` is in the range of ``C_s^T``.
+        """
+        C = self.operator(level)
+        q = np.asarray(q, dtype=float)
+        if q.shape != (C.shape[1],):
+            raise ValueError(f"q has shape {q.shape}, expected ({C.shape[1]},)")
+        return _sparse_solve(C @ C.T, C @ q, level, "Gram matrix C_s C_s^T",
+                             "no FE node depends on spline dof {dof}")
+
+    def to_nodes(self, q_s: np.ndarray, level: int) -> np.ndarray:
+        """Nodal field ``q = C_s^T q_s`` (Eq. 21), (n_fe,)."""
+        C = self.operator(level)
+        q_s = np.asarray(q_s, dtype=float)
+        if q_s.shape != (C.shape[0],):
+            raise ValueError(f"q_s has shape {q_s.shape}, expected ({C.shape[0]},)")
+        return C.T @ q_s
