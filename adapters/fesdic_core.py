@@ -18,19 +18,20 @@ import numpy as np
 import scipy.sparse as sps
 
 from fesdic_core.fe.elements import family_from_meshio
-from fesdic_core.shape.gauge import rigid_normal_modes
 from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals
+from fesdic_core.shape.gauge import rigid_normal_modes
+from georeg_plugin.levels.components import component_levels
 from georeg_plugin.levels.curved import is_flat
-from georeg_plugin.spline.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.levels.multipatch import part_component_space, part_mesh, part_space
 from georeg_plugin.levels.operators import MultilevelSpace, extraction_operator, multilevel_space
+from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.fe_mesh import check_element_degree, fe_mesh_from_spline
 from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.spline.refine import refine_uniform, refine_to_elements
-from georeg_plugin.levels.solver import GeometricRegularization
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "is_curved",
+__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "displacement_space", "is_curved",
            "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
@@ -231,6 +232,13 @@ def component_space_for_mesh(model: NominalModel, n_levels: int) -> MultilevelSp
         return multilevel_for_mesh(model, n_levels, curved=False)
     _check_part_levels(model, n_levels)
     return part_component_space(model.faces, n_levels, model.uv, model.node_face)
+
+
+def displacement_space(model: NominalModel, n_levels: int) -> MultilevelSpace:
+    """The spline levels of a displacement on the core's mesh: ``kron(C_s, I3)`` of the
+    scalar levels of one component (:func:`component_space_for_mesh`), in the core's
+    node-major dof layout ``3 I + k`` (:func:`~georeg_plugin.levels.components.component_levels`)."""
+    return component_levels(component_space_for_mesh(model, n_levels), 3)
 
 
 #: the rigid normal modes must lie in the scalar space to this relative accuracy

@@ -33,20 +33,21 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from fesdic_core.shape.driver import Measurement, MeasurementSettings, conclude, measure
-from fesdic_core.imaging.image import pyramid
-from fesdic_core.shape.operators import shape_gauss_newton
-from fesdic_core.solve.solvers import seen_dofs
-from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.fe.mesh import node_normals
+from fesdic_core.imaging.image import pyramid
+from fesdic_core.shape.driver import Measurement, MeasurementSettings, conclude, measure
+from fesdic_core.shape.operators import shape_gauss_newton
+from fesdic_core.shape.uncertainty import linearised_state
+from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.multipatch import part_space
 from georeg_plugin.levels.operators import MultilevelSpace, nested_space
-from georeg_plugin.spline.refine import insert_knots, refine_uniform
-from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain, penalty_per_dof,
-                                     predicted_fit)
+from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
+                                            penalty_per_dof, predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.refine import insert_knots, refine_uniform
 
-from adapters.fesdic_core import NominalModel, elements_per_span, is_curved, scalar_holds_rigid_motions
+from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
+                                  scalar_holds_rigid_motions)
 
 logger = logging.getLogger(__name__)
 

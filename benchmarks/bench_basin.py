@@ -25,11 +25,12 @@ import time
 import numpy as np
 
 from adapters.fesdic_core import georeg_solver, nominal_model
-from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.imaging.image import Image
 from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.shape.gauge import move_cameras_with_specimen
-from fesdic_core.imaging.image import Image
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import twisted_plate
 from georeg_plugin.spline.geometries import rectangle
 
 AXIS_ROTATION = np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)     # fixed, generic directions

@@ -36,7 +36,9 @@ from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, Im
 from georeg_app.shape.methods import MethodSpec, georeg_spec, tikhonov_spec  # noqa: E402
 from adapters.fesdic_core import georeg_solver  # noqa: E402
 from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
-from georeg_app.shape.pipeline import Truth, build_model, run_methods  # noqa: E402
+from georeg_app.inputs.nominal import build_model  # noqa: E402
+from georeg_app.shape.demo import Truth
+from georeg_app.shape.pipeline import run_methods
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline  # noqa: E402
 from georeg_plugin.spline.geometries import cylinder  # noqa: E402
 from georeg_plugin.levels.operators import extraction_operator, multilevel_space  # noqa: E402

@@ -47,13 +47,14 @@ def _median_time(fn, repeat: int) -> tuple[float, object]:
 
 
 def iteration(repeat: int) -> None:
-    from fesdic_core.imaging.image import Image
     from fesdic_core.fe.mesh import node_normals, rectangle_mesh
     from fesdic_core.fe.quadrature import pixel_quadrature
-    from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+    from fesdic_core.imaging.image import Image
     from fesdic_core.residual.graylevel import gray_level_residual
     from fesdic_core.shape.operators import current_nodes, shape_operators
     from fesdic_core.solve.solvers import DirectSolver
+    from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+    from fesdic_core.synthetic.specimen import twisted_plate
 
     dist = np.array([-0.06, 0.1, 0.0, 0.0, 0.0])
     cams = demo_cameras(image_size=(2448, 2048), stereo_angle_deg=25.0, field_mm=80.0, dist=dist)

@@ -18,8 +18,10 @@ import time
 
 import numpy as np
 
-from georeg_app.shape.pipeline import default_specs, demo_config, run_methods
 from georeg_app.report.html import check_claims
+from georeg_app.shape.demo import demo_config
+from georeg_app.shape.methods import default_specs
+from georeg_app.shape.pipeline import run_methods
 
 
 def main() -> None:

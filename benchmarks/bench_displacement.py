@@ -59,7 +59,8 @@ SCENE = dict(image_size=(800, 600), field_mm=80.0, plate_mm=(76.0, 56.0), mesh_m
 
 
 def _scene():
-    from fesdic_core.synthetic.render import demo_cameras, flat_plate, speckle_mm_for
+    from fesdic_core.synthetic.render import demo_cameras, speckle_mm_for
+    from fesdic_core.synthetic.specimen import flat_plate
     cameras = demo_cameras(image_size=SCENE["image_size"], field_mm=SCENE["field_mm"])
     plate = flat_plate(*SCENE["plate_mm"], speckle_mm=speckle_mm_for(cameras[0], SCENE["speckle_px"]),
                        seed=SCENE["seed"])
@@ -79,10 +80,11 @@ def _images(arrays, tag):
 
 def accuracy(levels: int, length_mm: float, jacobian: str = "reference") -> None:
     from fesdic_core.displacement.driver import (DisplacementSettings, displacement_reference,
-                                          measure_displacement)
+                                                 measure_displacement)
     from fesdic_core.displacement.strain import surface_green_lagrange
-    from fesdic_core.synthetic.render import (BendingMotion, RigidMotion, StretchMotion, render_stereo,
-                                    twisted_plate)
+    from fesdic_core.synthetic.motion import BendingMotion, RigidMotion, StretchMotion
+    from fesdic_core.synthetic.render import render_stereo
+    from fesdic_core.synthetic.specimen import twisted_plate
     from georeg_app.series.track import displacement_solver
 
     cameras, plate = _scene()
@@ -146,8 +148,9 @@ def iteration(repeat: int) -> None:
     from fesdic_core.displacement.residual import (displacement_operators, displacement_residual,
                                                    displacement_rhs)
     from fesdic_core.fe.mesh import rectangle_mesh
-    from fesdic_core.synthetic.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
     from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, sparse_solve
+    from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+    from fesdic_core.synthetic.specimen import flat_plate
 
     cams = demo_cameras(image_size=(2448, 2048), stereo_angle_deg=25.0, field_mm=80.0)
     plate = flat_plate(90.0, 75.0, speckle_mm=speckle_mm_for(cams[0], 4.0), seed=1)
@@ -224,7 +227,8 @@ def _stages(jacobian: str, names, iteration, res, repeat: int) -> None:
 def workers(counts, n_frames: int) -> None:
     import cv2
 
-    from fesdic_core.synthetic.render import RigidMotion, render_stereo
+    from fesdic_core.synthetic.motion import RigidMotion
+    from fesdic_core.synthetic.render import render_stereo
     from georeg_app import cli
 
     cameras, plate = _scene()
@@ -241,8 +245,8 @@ def workers(counts, n_frames: int) -> None:
             noisy = np.clip(np.rint(a + rng.normal(0, 2.0, a.shape)), 0, 255).astype(np.uint8)
             cv2.imwrite(str(folder / "frames" / f"f{i}_cam{k}.png"), noisy)
     model = _model()
-    from fesdic_core.fe.mesh_io import write_mesh
     from fesdic_core.cameras.rig import write_cameras_json
+    from fesdic_core.fe.mesh_io import write_mesh
     import json
     shape = folder / "shape_out"
     shape.mkdir()

@@ -7,7 +7,7 @@ measures what the prefilter does to the RMS shape error against the true surface
 of FE (no regularization), Tikhonov 5 mm and georeg (multiscale, its fixed spline levels: not the level search), and
 to their time:
 
-- ``demo``: the demo of ``georeg demo`` (``georeg_app.shape.pipeline.DEMO``): twisted open-hole
+- ``demo``: the demo of ``georeg demo`` (``georeg_app.shape.demo.DEMO``): twisted open-hole
   plate with waviness, 1224 x 816 px, 4 px speckle, 2 gray levels of noise, specimen pose
   perturbed by 0.5 deg / 0.5 mm, calibration, scales (2, 1, 0), 3 spline levels, the
   pipeline's mesh (1024 Q9).
@@ -71,12 +71,15 @@ from fesdic_core.shape.driver import MeasurementSettings, measure          # noq
 from fesdic_core.shape.gauge import move_cameras_with_specimen          # noqa: E402
 from fesdic_core.imaging.image import COMPILED_KERNEL, Image                # noqa: E402
 from fesdic_core.fe.mesh import boundary_nodes                         # noqa: E402
-from fesdic_core.synthetic.render import Specimen, demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.specimen import Specimen
 from fesdic_core.cameras.rig import write_cameras_json                      # noqa: E402
 from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
                                MethodConfig, OutputConfig)
 from georeg_app.shape.methods import default_specs, georeg_spec               # noqa: E402
-from georeg_app.shape.pipeline import DEMO, Truth, build_model, demo_specimen, run_methods  # noqa: E402
+from georeg_app.inputs.nominal import build_model  # noqa: E402
+from georeg_app.shape.demo import DEMO, Truth, demo_specimen
+from georeg_app.shape.pipeline import run_methods
 from scenes import bump_specimen                                     # noqa: E402
 
 METHODS = ("FE (multiscale)", "Tikhonov 5 mm", "georeg (multiscale)")

@@ -81,8 +81,8 @@ from adapters.level_search import measure_auto_levels  # noqa: E402
 from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
 from fesdic_core.fe.elements import family_from_meshio, gauss_rule  # noqa: E402
 from fesdic_core.imaging.image import Image  # noqa: E402
-from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,  # noqa: E402
-                                speckle_texture, true_normal_offset, twisted_plate)
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, speckle_texture, true_normal_offset
+from fesdic_core.synthetic.specimen import twisted_plate
 from fesdic_core.solve.tikhonov import TikhonovSolver  # noqa: E402
 from fesdic_core.solve.solvers import seen_dofs  # noqa: E402
 from fesdic_core.shape.uncertainty import linearised_state  # noqa: E402
@@ -91,7 +91,7 @@ from georeg_plugin.spline.geometries import plate_with_hole, rectangle  # noqa: 
 TIKHONOV_MM = (5.0, 10.0, 20.0)
 FIXED_LEVELS = (2, 3, 4)
 START_LEVELS = 3
-DEMO = dict(scenes.SMALL_DEMO, image_size=(1224, 816))     # georeg_app.shape.pipeline.DEMO's scene
+DEMO = dict(scenes.SMALL_DEMO, image_size=(1224, 816))     # georeg_app.shape.demo.DEMO's scene
 
 
 @dataclasses.dataclass

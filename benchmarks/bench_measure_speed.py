@@ -5,7 +5,7 @@ regularization (3 spline levels), image scales (2, 1, 0), calibration of the ext
 (the fixed point of section 2.2) and the end-of-measurement uncertainty
 (:mod:`fesdic_core.shape.uncertainty`). Scenes (rendered once, pixel-area integrated):
 
-- ``demo``: the demo's twisted open-hole plate with waviness (georeg_app.shape.pipeline.DEMO),
+- ``demo``: the demo's twisted open-hole plate with waviness (georeg_app.shape.demo.DEMO),
   1224 x 816 px, noise of 2 gray levels, poses perturbed by 0.5 deg / 0.5 mm;
 - ``bump``: the shape family at the demo's scale (tests/scenes.py ``FAMILY_DEMO_SCALE``),
   1200 x 1000 px, a 96 x 80 mm plate with a bump of sigma = width / 5, 48 x 40 Q9 elements,
@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import collections
 import contextlib
-import dataclasses
 import os
 import pickle
 import platform
@@ -42,18 +41,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]   # the packages before tests/, whose folders mirror them
 
 from adapters.fesdic_core import georeg_solver, nominal_model  # noqa: E402
-from fesdic_core.fe import quadrature
 from fesdic_core.shape import driver, operators as shape, uncertainty  # noqa: E402
-from fesdic_core.residual import graylevel as residual
 from fesdic_core.shape import calibration  # noqa: E402
 from fesdic_core.synthetic.accuracy import shape_error_to_surface  # noqa: E402
 from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
-from fesdic_core.imaging.image import Image  # noqa: E402
 
 
 # ----------------------------------------------------------------------------- scenes
 def demo_scene():
-    from georeg_app.shape.pipeline import build_model, demo_config, load_cameras
+    from georeg_app.inputs.cameras import load_cameras
+    from georeg_app.inputs.nominal import build_model
+    from georeg_app.shape.demo import demo_config
     config, images, truth = demo_config("demo_out")              # nothing is written there
     cameras = load_cameras(config.cameras, images)
     return build_model(config.geometry, 3), images, cameras, truth.specimen

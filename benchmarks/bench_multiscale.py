@@ -30,13 +30,14 @@ import time
 
 import numpy as np
 
-from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.imaging.image import Image
 from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.shape.gauge import move_cameras_with_specimen
-from fesdic_core.imaging.image import Image
-from fesdic_core.fe.mesh import rectangle_mesh
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
 from fesdic_core.solve.solvers import DirectSolver
+from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import twisted_plate
 
 logger = logging.getLogger("bench_multiscale")
 

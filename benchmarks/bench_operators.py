@@ -23,18 +23,19 @@ import time
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.imaging.image import Image
-from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals
 from fesdic_core.fe.elements import FAMILIES
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+from fesdic_core.imaging.image import Image
 from fesdic_core.residual.graylevel import gray_level_residual
 from fesdic_core.shape.operators import shape_operators
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import twisted_plate
+from georeg_plugin.levels.operators import multilevel_space
+from georeg_plugin.levels.solver import GeometricRegularization
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import plate_with_hole
-from georeg_plugin.levels.operators import multilevel_space
 from georeg_plugin.spline.refine import refine_uniform
-from georeg_plugin.levels.solver import GeometricRegularization
 
 
 def q9_hessian(connectivity: np.ndarray, n_nodes: int, seed: int = 0) -> sps.csr_matrix:

@@ -128,17 +128,18 @@ import numpy as np
 
 from adapters.fesdic_core import nominal_model
 from adapters.level_search import ladder, measure_auto_levels
+from fesdic_core.fe.mesh import nodal_areas
+from fesdic_core.imaging.image import Image
 from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.shape.gauge import split_rigid_part
-from fesdic_core.imaging.image import Image
-from fesdic_core.fe.mesh import nodal_areas
-from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for, true_normal_offset,
-                                twisted_plate)
 from fesdic_core.shape.operators import current_nodes
-from fesdic_core.solve.tikhonov import TikhonovSolver
 from fesdic_core.shape.uncertainty import noise_model
-from georeg_plugin.spline.geometries import rectangle
+from fesdic_core.solve.tikhonov import TikhonovSolver
+from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,
+                                          true_normal_offset)
+from fesdic_core.synthetic.specimen import twisted_plate
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.geometries import rectangle
 
 MESH_MM = (60.0, 40.0)
 ELEMENTS = (12, 8)

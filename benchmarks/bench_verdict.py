@@ -17,10 +17,11 @@ import platform
 
 import numpy as np
 
-from fesdic_core.shape.driver import MeasurementInputError, MeasurementSettings, measure
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import rectangle_mesh
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for, twisted_plate
+from fesdic_core.imaging.image import Image
+from fesdic_core.shape.driver import MeasurementInputError, MeasurementSettings, measure
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import twisted_plate
 
 
 def images_of(specimen, cameras, noise_std: float) -> tuple[Image, Image]:

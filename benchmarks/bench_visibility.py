@@ -112,7 +112,8 @@ def main() -> None:
 def demo(repeat: int) -> None:
     import tempfile
     from fesdic_core.fe.quadrature import pixel_quadrature
-    from georeg_app.shape.pipeline import DEMO, build_model, demo_config
+    from georeg_app.inputs.nominal import build_model
+    from georeg_app.shape.demo import DEMO, demo_config
     config, _, _ = demo_config(tempfile.mkdtemp())
     mesh = build_model(config.geometry, config.method.fixed_levels).mesh
     cams = demo_cameras(image_size=DEMO["image_size"], stereo_angle_deg=DEMO["stereo_angle_deg"],
@@ -131,9 +132,10 @@ def demo(repeat: int) -> None:
 
 
 def view_angles(tilts=(40.0, 50.0, 55.0, 60.0, 65.0, 70.0)) -> None:
-    from fesdic_core.shape.driver import MeasurementSettings, measure
     from fesdic_core.imaging.image import Image
-    from fesdic_core.synthetic.render import Specimen, render_stereo, speckle_mm_for, speckle_texture
+    from fesdic_core.shape.driver import MeasurementSettings, measure
+    from fesdic_core.synthetic.render import render_stereo, speckle_mm_for, speckle_texture
+    from fesdic_core.synthetic.specimen import Specimen
     cams = demo_cameras(image_size=(480, 320), field_mm=72.0)
     speckle = speckle_mm_for(cams[0], 4.0)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, "

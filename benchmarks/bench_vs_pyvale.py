@@ -18,7 +18,7 @@ Cases (synthetic, known truth, the same rendered pair for both codes):
   (``tests/scenes.py`` FAMILY_DEMO_SCALE: a 96 x 80 mm plate, 1200 x 1000 px, 0.1 mm/px,
   two cameras at 25 deg, 4 px speckle): flat, and a 0.5 mm Gaussian bump of sigma 16 mm
   (W/5) and 4 mm (W/20);
-- ``twisted``: the demo's specimen (``georeg_app.shape.pipeline.DEMO``): the 180 x 50 mm open-hole
+- ``twisted``: the demo's specimen (``georeg_app.shape.demo.DEMO``): the 180 x 50 mm open-hole
   plate seen over 100 mm, 1 mm twist at the view's corners and a 0.2 mm waviness, images of
   1224 x 816 px (0.09 mm/px);
 
@@ -172,8 +172,8 @@ def build_case(shape: str) -> Case:
     import scenes
     from fesdic_core.synthetic.render import demo_cameras, speckle_mm_for
     from georeg_app.config.measure import GeometryConfig
-    from georeg_app.shape.pipeline import DEMO, demo_specimen
-    if shape == "twisted":                                 # as georeg_app.shape.pipeline.demo_config
+    from georeg_app.shape.demo import DEMO, demo_specimen
+    if shape == "twisted":                                 # as georeg_app.shape.demo.demo_config
         d = DEMO
         cameras = demo_cameras(image_size=d["image_size"], stereo_angle_deg=d["stereo_angle_deg"],
                                field_mm=d["field_mm"])
@@ -227,7 +227,7 @@ def roi_and_seed(case: Case) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
     """pyvale's ROI (camera-0 pixels seeing the nominal region on z = 0), the same eroded
     by a subset (centres of whole subsets inside it) and a seed where the ROI is deepest."""
     import cv2
-    from fesdic_core.synthetic.render import pixel_rays
+    from fesdic_core.synthetic.rays import pixel_rays
     cam = case.cameras[0]
     w, h = cam.image_size
     y, x = np.mgrid[0:h, 0:w]
@@ -524,7 +524,7 @@ def print_rows(rows: list[dict], markdown: bool = False) -> None:
 
 def describe_machine(args) -> None:
     from importlib.metadata import version
-    from georeg_app import installed_version
+    from georeg_app.version import installed_version
     commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip() or "?"
     print(f"machine: {platform.platform()}, {platform.processor() or platform.machine()}, "

@@ -35,18 +35,19 @@ import scipy.sparse.linalg as spla
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
 from fesdic_core.atomic import atomic_path
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import node_normals
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,
-                                true_normal_offset, twisted_plate)
+from fesdic_core.imaging.image import Image
 from fesdic_core.residual.graylevel import gray_level_residual
 from fesdic_core.shape.operators import shape_gauss_newton, shape_operators
 from fesdic_core.solve.solvers import DirectSolver
-from georeg_plugin.spline.geometries import rectangle
+from fesdic_core.synthetic.render import (demo_cameras, render_stereo, speckle_mm_for,
+                                          true_normal_offset)
+from fesdic_core.synthetic.specimen import twisted_plate
 from georeg_plugin.levels.operators import extraction_operator
-from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
 
 LENGTH_MM, WIDTH_MM = 60.0, 40.0      # the plate, centred at the origin, nominal z = 0
 FE_ELEMENTS = (6, 4)                  # Q9 elements along x and y

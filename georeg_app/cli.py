@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import logging
 import os
 import sys
@@ -31,8 +32,8 @@ import traceback
 from pathlib import Path
 from typing import Sequence
 
-from georeg_app import installed_version
 from georeg_app.config.measure import load_config
+from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
 
@@ -175,14 +176,14 @@ def check_output_folder(out: Path, overwrite: bool) -> None:
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     if args.command == "track":
-        from georeg_app.track_cli import run_track_command
-        return run_track_command(args, check_output_folder, progress_enabled(args.quiet))
+        return _run_track(args, progress_enabled(args.quiet))
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
+    from georeg_app.shape.demo import demo_config
+    from georeg_app.shape.methods import default_specs, measure_specs
     from georeg_app.shape.outputs import REPORT_FILE, summary_dict, write_all
-    from georeg_app.shape.methods import measure_specs
-    from georeg_app.shape.pipeline import default_specs, demo_config, run_methods
+    from georeg_app.shape.pipeline import run_methods
 
     progress = progress_enabled(args.quiet)
     images = truth = None
@@ -209,6 +210,53 @@ def _run(args: argparse.Namespace) -> Path:
     if failed and (args.command == "measure" or len(failed) == len(summary["methods"])):
         raise MeasurementFailed("; ".join(f"{m['label']} failed: {m['failure']}" for m in failed))
     write_all(out, run, overwrite=args.overwrite)
+    return Path(out) / REPORT_FILE
+
+
+SCHEDULERS = ("serial", "threads", "processes")
+
+
+def check_scheduler(scheduler: str) -> str:
+    """The scheduler, checked before any computing (Dask installed for all but "serial")."""
+    if scheduler not in SCHEDULERS and not scheduler.startswith("tcp://"):
+        raise ValueError(f"--scheduler {scheduler!r}: expected one of {', '.join(SCHEDULERS)} or "
+                         "tcp://HOST:PORT")
+    if scheduler != "serial":
+        try:
+            importlib.import_module("distributed")
+        except ImportError:
+            raise RuntimeError(f"--scheduler {scheduler}: Dask is not installed (pip install "
+                               "\"dask[distributed]\"); use --scheduler serial") from None
+    return scheduler
+
+
+def _run_track(args: argparse.Namespace, progress: bool) -> Path:
+    """Run ``georeg track``; returns the path of the report written.
+
+    Bad input (a frame of another size, counts that differ between the cameras, a missing
+    file, a reference folder that lacks a file) is one error line naming it, exit status 1 and
+    nothing written. A frame that fails its checks is marked in summary.json and left out of
+    ``displacement.pvd``; the command fails (status 1, nothing written) only when every frame
+    failed.
+    """
+    from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE, write_track
+    from georeg_app.series.track import run_track
+
+    scheduler = check_scheduler(args.scheduler)
+    from georeg_app.config.track import load_track_config
+    config = load_track_config(args.config)                                   # fail fast
+    out = args.out if args.out is not None else config.output.dir
+    check_output_folder(out, args.overwrite)                                  # before computing
+    config = config.with_output_dir(out)
+    run = run_track(config, scheduler, progress, workers=args.workers)
+    failed = [f for f in run.frames if not f.ok]
+    if failed and len(failed) == len(run.frames):
+        raise MeasurementFailed("every frame failed: " + "; ".join(
+            f"frame {f.index}: {f.failure}" for f in failed[:3]) + (" ..." if len(failed) > 3 else ""))
+    if failed:
+        logger.warning("%d of %d frames failed (marked in %s): %s", len(failed), len(run.frames),
+                       SUMMARY_FILE, ", ".join(str(f.index) for f in failed))
+    write_track(out, run, overwrite=args.overwrite)
     return Path(out) / REPORT_FILE
 
 

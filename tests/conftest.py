@@ -15,7 +15,8 @@ if os.environ.get("CI"):
 
 import scenes
 from fesdic_core.imaging.image import Image
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, twisted_plate
+from fesdic_core.synthetic.render import demo_cameras, render_stereo
+from fesdic_core.synthetic.specimen import twisted_plate
 
 
 @pytest.fixture(scope="session")

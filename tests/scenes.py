@@ -5,10 +5,10 @@ import functools
 import numpy as np
 
 from fesdic_core.imaging.image import Image
-from fesdic_core.synthetic.render import (Specimen, demo_cameras, render_stereo, speckle_mm_for,
-                                twisted_plate)
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import Specimen, twisted_plate
 
-#: the demo's scene (georeg_app.shape.pipeline.DEMO) with images of 500 x 333 px instead of
+#: the demo's scene (georeg_app.shape.demo.DEMO) with images of 500 x 333 px instead of
 #: 1224 x 816: a 180 x 50 mm plate with a 14 mm hole seen over its central 100 mm, twist
 #: of 1 mm at the corners of the view plus a 0.2 mm waviness (not in any spline level),
 #: two cameras at 25 deg, 4 px speckle, noise of 2 gray levels.

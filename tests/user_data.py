@@ -2,8 +2,8 @@
 import cv2
 import numpy as np
 
-from fesdic_core.shape.gauge import move_cameras_with_specimen
 from fesdic_core.cameras.rig import write_cameras_json
+from fesdic_core.shape.gauge import move_cameras_with_specimen
 
 
 def perturbed_pose(cameras, angle_deg=0.5, shift_mm=0.5):

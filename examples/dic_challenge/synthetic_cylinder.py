@@ -37,7 +37,8 @@ from fesdic_core.shape.driver import MeasurementSettings, measure              #
 from fesdic_core.shape.gauge import move_cameras_with_specimen                 # noqa: E402
 from fesdic_core.imaging.image import Image, read_image                          # noqa: E402
 from fesdic_core.fe.mesh import node_normals                                # noqa: E402
-from fesdic_core.synthetic.render import Specimen as Scene, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.render import render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.specimen import Specimen as Scene
 from fesdic_core.cameras.rig import initial_rig_pose, read_pyvale_csv, stereo_transform  # noqa: E402
 from georeg_plugin.spline.geometries import cylinder, quadrilateral, transformed  # noqa: E402
 from georeg_plugin.spline.refine import refine_to_elements                      # noqa: E402

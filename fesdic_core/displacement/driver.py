@@ -38,18 +38,18 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
-                                    displacement_operators, displacement_residual,
-                                    displacement_rhs, reference_view)
 from fesdic_core.checks import MeasurementInputError, check_inputs, check_scales
+from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
+                                               displacement_operators, displacement_residual,
+                                               displacement_rhs, reference_view)
+from fesdic_core.fe.mesh import SurfaceMesh
+from fesdic_core.fe.quadrature import pixel_quadrature
+from fesdic_core.imaging.image import Image, pyramid
+from fesdic_core.imaging.noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
+from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 from fesdic_core.shape.verdict import judge
-from fesdic_core.imaging.image import Image, pyramid
-from fesdic_core.fe.mesh import SurfaceMesh
-from fesdic_core.imaging.noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
-from fesdic_core.fe.quadrature import pixel_quadrature
 from fesdic_core.solve.gauss_newton import damped_gauss_newton
-from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StepSolver
 
 logger = logging.getLogger(__name__)

@@ -36,8 +36,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from fesdic_core.fe.mesh import assemble
-from fesdic_core.parallel import for_each_block, for_each_span
 from fesdic_core.fe.quadrature import PixelQuadrature
+from fesdic_core.parallel import for_each_block, for_each_span
 from fesdic_core.residual.graylevel import NORMALISATIONS
 
 __all__ = ["ReferenceView", "DisplacementResidual", "reference_view", "reference_jacobian",

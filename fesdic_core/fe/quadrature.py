@@ -20,6 +20,8 @@ from fesdic_core.fe.mesh import SurfaceMesh
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["ElementGroup", "PixelQuadrature", "subdivisions", "pixel_quadrature"]
+
 # corners of each reference shape in the gmsh numbering (first nodes)
 _N_CORNERS = {"quad": 4, "triangle": 3}
 

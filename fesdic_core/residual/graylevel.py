@@ -13,10 +13,12 @@ from typing import Literal, Sequence
 
 import numpy as np
 
-from fesdic_core.parallel import for_each_span
 from fesdic_core.fe.quadrature import PixelQuadrature
+from fesdic_core.parallel import for_each_span
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["NORMALISATIONS", "GrayLevelResidual", "gray_level_residual"]
 
 Normalisation = Literal["element", "global", "none"]
 NORMALISATIONS = ("element", "global", "none")

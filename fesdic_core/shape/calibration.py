@@ -34,14 +34,16 @@ from typing import Sequence
 import numpy as np
 from scipy.linalg import null_space
 
-from fesdic_core.solve.damping import damped_step, relaxed
+from fesdic_core.cameras.camera import rodrigues
+from fesdic_core.cameras.rig import place_camera1
 from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
 from fesdic_core.shape.operators import chi_square
-from fesdic_core.cameras.camera import rodrigues
-from fesdic_core.cameras.rig import place_camera1
+from fesdic_core.solve.damping import damped_step, relaxed
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calibrate_extrinsics"]
 
 
 @dataclass(frozen=True)

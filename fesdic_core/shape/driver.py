@@ -26,12 +26,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from fesdic_core.cameras.rig import stereo_transform
-from fesdic_core.checks import (
-    MeasurementInputError,
-    check_inputs,
-    check_scales,
-    check_texture,
-)
+from fesdic_core.checks import MeasurementInputError, check_inputs, check_scales, check_texture
 from fesdic_core.fe.mesh import SurfaceMesh, nodal_areas, node_normals
 from fesdic_core.fe.quadrature import PixelQuadrature, pixel_quadrature
 from fesdic_core.imaging.image import Image, pyramid
@@ -40,19 +35,10 @@ from fesdic_core.residual.edges import edge_margin_mask
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
 from fesdic_core.residual.visibility import visibility_mask
 from fesdic_core.shape.calibration import calibrate_extrinsics
-from fesdic_core.shape.gauge import (
-    pose_directions,
-    rigid_normal_modes,
-    tangential_motions,
-    transfer_rigid_part,
-)
-from fesdic_core.shape.operators import (
-    GaussNewtonLog,
-    ShapeResult,
-    chi_square_change,
-    current_nodes,
-    shape_gauss_newton,
-)
+from fesdic_core.shape.gauge import (pose_directions, rigid_normal_modes, tangential_motions,
+                                     transfer_rigid_part)
+from fesdic_core.shape.operators import (GaussNewtonLog, ShapeResult, chi_square_change,
+                                         current_nodes, shape_gauss_newton)
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
 from fesdic_core.shape.uncertainty import linearised_state, noise_model, shape_std
 from fesdic_core.shape.verdict import ShapeDivergedError, _diverged, judge

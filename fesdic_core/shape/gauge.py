@@ -22,6 +22,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+__all__ = ["TANGENTIAL_RTOL", "rigid_normal_modes", "checked_weights", "split_rigid_part",
+           "move_cameras_with_specimen", "transfer_rigid_part", "tangential_motions",
+           "pose_directions", "best_fit_plane_distance", "rigid_align"]
+
 #: relative singular value (rotations times the surface radius) below which a rigid motion
 #: slides the surface in itself. An exact slide (rotation of a cylinder about its axis) is
 #: seen through the FE node normals' error: 3e-4 (R 30 mm), 3e-5 / 7e-6 (R 100 mm, 8 / 16

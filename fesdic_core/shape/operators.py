@@ -20,14 +20,17 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sps
 
-from fesdic_core.solve.gauss_newton import damped_gauss_newton, predicted_change
 from fesdic_core.fe.mesh import assemble
-from fesdic_core.parallel import for_each_block
 from fesdic_core.fe.quadrature import PixelQuadrature
+from fesdic_core.parallel import for_each_block
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
+from fesdic_core.solve.gauss_newton import damped_gauss_newton, predicted_change
 from fesdic_core.solve.solvers import StepSolver
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["current_nodes", "shape_operators", "GaussNewtonLog", "ShapeResult", "chi_square",
+           "chi_square_change", "predicted_chi_square_change", "shape_gauss_newton"]
 
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
 

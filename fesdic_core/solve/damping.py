@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Callable, TypeVar
 
+__all__ = ["ACCEPT_RTOL", "MU_START", "damped_step", "relaxed"]
+
 #: a step is accepted unless it raises the residual by more than this fraction: below it,
 #: differences are round-off and the per-element normalisation that Gauss-Newton does not
 #: differentiate (Remark 2), not a worse fit

@@ -21,6 +21,8 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["SingularSystemError", "StepSolver", "sparse_solve", "sparse_factor", "seen_dofs",
+           "DirectSolver", "CachedFactorization", "inverse_diagonal", "inverse_covariance"]
 
 
 class SingularSystemError(RuntimeError):

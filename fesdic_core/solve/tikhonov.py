@@ -42,6 +42,8 @@ from fesdic_core.solve.tikhonov_choice import CpCurve, covariance_diagonal, leng
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["surface_gradient_operator", "tikhonov_weight", "WEAKER_FACTOR", "TikhonovSolver"]
+
 #: a cosine probe whose ``v^T A v`` is below this fraction of ``|v|^T |A| |v|`` has no
 #: gradient (round-off)
 _ROUND_OFF = 1e-9

@@ -48,6 +48,10 @@ from fesdic_core.solve.solvers import SingularSystemError
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["DENSE_CP_MAX_DOFS", "DENSE_COVARIANCE_MAX_DOFS", "HUTCHINSON_PROBES",
+           "HUTCHINSON_SEED", "COLUMN_BLOCK", "GRID_SIZE", "CpCurve", "element_size",
+           "mesh_extent", "length_grid", "mallows_cp", "covariance_diagonal"]
+
 #: up to this many dofs the trace of Cp is exact (dense generalized eigendecomposition,
 #: ~0.1 s at 300 dofs, growing like n**3; Hutchinson's costs ~0.1-0.2 ms per dof)
 DENSE_CP_MAX_DOFS = 300

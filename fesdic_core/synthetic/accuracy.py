@@ -19,7 +19,11 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from fesdic_core.synthetic.render import Specimen, intersect_surface, pixel_rays
+from fesdic_core.synthetic.rays import intersect_surface, pixel_rays
+from fesdic_core.synthetic.specimen import Specimen
+
+__all__ = ["MAX_ALIGN_ROTATION_RAD", "MAX_ALIGN_SHIFT_FRACTION", "shape_error_to_surface",
+           "stereo_correspondence_error"]
 
 
 def _normal_distance(specimen: Specimen, X: np.ndarray) -> np.ndarray:

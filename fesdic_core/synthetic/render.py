@@ -16,9 +16,8 @@ import logging
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
-from functools import partial
-from typing import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -26,123 +25,20 @@ from scipy import ndimage
 from tqdm import tqdm
 
 from fesdic_core.cameras.camera import Camera
+from fesdic_core.synthetic.motion import Motion, intersect_displaced
+from fesdic_core.synthetic.rays import intersect_surface, pixel_rays
+from fesdic_core.synthetic.specimen import Specimen
 
 logger = logging.getLogger(__name__)
 
-HeightFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
-GradientFunction = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+__all__ = ["GRAY_RANGE", "TEXELS_PER_SPECKLE", "MAX_TEXELS", "CHUNK_RAYS", "SpeckleTexture",
+           "speckle_texture", "speckle_mm_for", "render_stereo", "look_at", "demo_cameras",
+           "true_surface_points", "true_normal_offset"]
 
 GRAY_RANGE = (30.0, 220.0)  # gray levels of the dots and of the paint
 TEXELS_PER_SPECKLE = 6  # texel size = speckle_mm / 6
 MAX_TEXELS = 100_000_000
 CHUNK_RAYS = 1 << 19  # rays per chunk (~130 MB of work arrays; one chunk per thread)
-
-
-def _flat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return np.zeros(np.broadcast(x, y).shape)
-
-
-def _flat_gradient(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return _flat(x, y), _flat(x, y)
-
-
-@dataclass(frozen=True)
-class Specimen:
-    """Speckled plate centred at the world origin, nominal plane ``z = 0``.
-
-    x runs along ``length_mm``, y along ``width_mm``; the actual surface is
-    ``z = height(x, y)``; an optional central through hole shows the background.
-    ``texture`` (x, y) -> gray, if given, replaces the seeded speckle.
-    """
-
-    length_mm: float
-    width_mm: float
-    hole_radius_mm: float | None = None
-    height: HeightFunction = _flat
-    height_gradient: GradientFunction = _flat_gradient
-    speckle_mm: float = 0.3
-    seed: int = 0
-    texture: HeightFunction | None = field(default=None, compare=False)
-
-    def __post_init__(self) -> None:
-        for name in ("length_mm", "width_mm", "speckle_mm"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"Specimen.{name} must be a positive number, got {value!r}")
-        r = self.hole_radius_mm
-        if r is not None and not (0 < r < 0.5 * min(self.length_mm, self.width_mm)):
-            raise ValueError(
-                f"Specimen.hole_radius_mm must lie in (0, {0.5 * min(self.length_mm, self.width_mm)}), got {r!r}"
-            )
-        if not (callable(self.height) and callable(self.height_gradient)):
-            raise ValueError("Specimen.height and Specimen.height_gradient must be callables (x, y) -> ...")
-
-    def contains(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """True where ``(x, y)`` (mm) is material: inside the plate, outside the hole."""
-        inside = (np.abs(x) <= 0.5 * self.length_mm) & (np.abs(y) <= 0.5 * self.width_mm)
-        if self.hole_radius_mm is not None:
-            inside &= x * x + y * y >= self.hole_radius_mm**2
-        return inside
-
-
-def _twist_height(x, y, k, waviness_mm, view_length_mm, width_mm):
-    z = k * x * y
-    if waviness_mm:
-        z = z + waviness_mm * np.cos(np.pi / view_length_mm * x) * np.cos(np.pi / width_mm * y)
-    return z
-
-
-def _twist_gradient(x, y, k, waviness_mm, view_length_mm, width_mm):
-    dz_dx, dz_dy = k * y, k * x
-    if waviness_mm:
-        ax, ay = np.pi / view_length_mm, np.pi / width_mm
-        cx, sx, cy, sy = np.cos(ax * x), np.sin(ax * x), np.cos(ay * y), np.sin(ay * y)
-        dz_dx = dz_dx - waviness_mm * ax * sx * cy
-        dz_dy = dz_dy - waviness_mm * ay * cx * sy
-    return dz_dx, dz_dy
-
-
-def twisted_plate(
-    length_mm: float,
-    width_mm: float,
-    corner_mm: float = 0.5,
-    hole_radius_mm: float | None = None,
-    waviness_mm: float = 0.0,
-    view_length_mm: float | None = None,
-    speckle_mm: float = 0.3,
-    seed: int = 0,
-) -> Specimen:
-    """Twisted plate ``z = k x y + a cos(pi x / Lv) cos(pi y / W)``.
-
-    ``k = corner_mm / (Lv/2 * W/2)`` puts ``corner_mm`` at the corners
-    ``(+-Lv/2, +-W/2)`` of the viewed central part of length ``Lv =
-    view_length_mm`` (default: the whole length), where the waviness term of
-    amplitude ``a = waviness_mm`` (a central bump) vanishes.
-    """
-    view = length_mm if view_length_mm is None else view_length_mm
-    if not (0 < view <= length_mm):
-        raise ValueError(f"view_length_mm must lie in (0, length_mm={length_mm}], got {view_length_mm!r}")
-    params = dict(
-        k=corner_mm / (0.25 * view * width_mm),
-        waviness_mm=waviness_mm,
-        view_length_mm=view,
-        width_mm=width_mm,
-    )
-    return Specimen(
-        length_mm=length_mm,
-        width_mm=width_mm,
-        hole_radius_mm=hole_radius_mm,
-        height=partial(_twist_height, **params),
-        height_gradient=partial(_twist_gradient, **params),
-        speckle_mm=speckle_mm,
-        seed=seed,
-    )
-
-
-def flat_plate(length_mm: float, width_mm: float, hole_radius_mm: float | None = None, **kwargs) -> Specimen:
-    """Flat plate ``z = 0`` (see :class:`Specimen` for the keyword arguments)."""
-    return Specimen(length_mm=length_mm, width_mm=width_mm, hole_radius_mm=hole_radius_mm, **kwargs)
-
 
 # ----------------------------------------------------------------------------- texture
 @dataclass(frozen=True)
@@ -202,164 +98,6 @@ def speckle_mm_for(camera, speckle_px: float = 4.0) -> float:
 
 
 # ----------------------------------------------------------------------------- rays
-def pixel_rays(camera, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Back-project pixel coordinates to world rays (inverse of the projection).
-
-    Parameters
-    ----------
-    camera : duck-typed camera (``K``, ``dist``, ``rvec``, ``tvec``)
-    xy : (n, 2) pixel coordinates (column, row)
-
-    Returns
-    -------
-    centre : (3,) camera centre in world mm; directions : (n, 3) world
-    directions with unit z_cam component (the point at depth z_cam is
-    ``centre + z_cam * direction``).
-    """
-    K = np.asarray(camera.K, float)
-    dist = np.asarray(camera.dist, float).ravel()
-    xy = np.asarray(xy, float).reshape(-1, 2)
-    fx, skew, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
-    # remove the skew: u = fx x_d + skew y_d + cx, v = fy y_d + cy
-    yd = (xy[:, 1] - cy) / fy
-    if np.any(dist != 0.0):
-        K0 = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-        src = np.stack([xy[:, 0] - skew * yd, xy[:, 1]], axis=1).reshape(-1, 1, 2)
-        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-9)  # eps in px
-        xn = cv2.undistortPoints(src, K0, dist, criteria=criteria).reshape(-1, 2)
-    else:
-        xn = np.stack([(xy[:, 0] - cx - skew * yd) / fx, yd], axis=1)
-    R = cv2.Rodrigues(np.asarray(camera.rvec, float).reshape(3, 1))[0]
-    t = np.asarray(camera.tvec, float).ravel()
-    d_cam = np.column_stack([xn, np.ones(len(xn))])
-    return -R.T @ t, d_cam @ R  # rows R^T d_cam
-
-
-def intersect_surface(
-    specimen: Specimen, origins: np.ndarray, directions: np.ndarray, tol_mm: float = 1e-10, max_iter: int = 50
-) -> np.ndarray:
-    """Ray parameters ``lam`` with ``origins + lam directions`` on ``z = height(x, y)``.
-
-    Vectorised Newton on ``g(lam) = o_z + lam d_z - height(o_x + lam d_x, o_y + lam d_y)``
-    started from the nominal plane ``z = 0``; ``origins`` (3,) or (n, 3),
-    ``directions`` (n, 3). Rays parallel to the plane or not converged get NaN.
-    """
-    o = np.broadcast_to(np.asarray(origins, float), np.shape(directions))
-    d = np.asarray(directions, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = -o[:, 2] / d[:, 2]
-    lam[~np.isfinite(lam)] = np.nan
-    for _ in range(max_iter):
-        x, y = o[:, 0] + lam * d[:, 0], o[:, 1] + lam * d[:, 1]
-        g = o[:, 2] + lam * d[:, 2] - specimen.height(x, y)
-        if not np.nanmax(np.abs(g), initial=0.0) > tol_mm:
-            return lam
-        hx, hy = specimen.height_gradient(x, y)
-        lam = lam - g / (d[:, 2] - hx * d[:, 0] - hy * d[:, 1])
-    x, y = o[:, 0] + lam * d[:, 0], o[:, 1] + lam * d[:, 1]
-    bad = ~(np.abs(o[:, 2] + lam * d[:, 2] - specimen.height(x, y)) <= tol_mm)
-    logger.warning("ray-surface Newton: %d of %d rays did not converge", int(np.sum(bad & np.isfinite(lam))), lam.size)
-    lam[bad] = np.nan
-    return lam
-
-
-# ----------------------------------------------------------------------------- motions
-#: a displacement of the specimen's material points: ``X`` (n, 3) on the undeformed surface
-#: ``z = height(x, y)`` (mm) -> ``u`` (n, 3) mm; the point and its paint move to ``X + u``
-Motion = Callable[[np.ndarray], np.ndarray]
-
-
-@dataclass(frozen=True)
-class RigidMotion:
-    """``u(X) = R (X - centre) + centre + translation - X``; ``R`` of the rotation vector
-    ``rvec`` (rad, Rodrigues)."""
-
-    translation_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rvec: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    def __call__(self, X: np.ndarray) -> np.ndarray:
-        R = cv2.Rodrigues(np.asarray(self.rvec, float).reshape(3, 1))[0]
-        c = np.asarray(self.centre_mm, float)
-        Y = np.asarray(X, float) - c
-        moved = Y[:, :1] * R[:, 0] + Y[:, 1:2] * R[:, 1] + Y[:, 2:] * R[:, 2]   # R Y, row-wise
-        return moved - Y + np.asarray(self.translation_mm, float)
-
-
-@dataclass(frozen=True)
-class BendingMotion:
-    """Out-of-plane bending ``u = (0, 0, deflection (2 x / span)**2)``: a parabola along x,
-    zero at ``x = 0`` and ``deflection_mm`` at ``x = +-span_mm / 2``."""
-
-    deflection_mm: float
-    span_mm: float
-
-    def __call__(self, X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, float)
-        u = np.zeros_like(X)
-        u[:, 2] = self.deflection_mm * (2.0 * X[:, 0] / self.span_mm) ** 2
-        return u
-
-
-@dataclass(frozen=True)
-class StretchMotion:
-    """Uniform in-plane stretch along x: ``u = (strain (x - centre_x), 0, 0)`` (engineering
-    strain; the Green-Lagrange strain is ``strain + strain**2 / 2``)."""
-
-    strain: float
-    centre_x_mm: float = 0.0
-
-    def __call__(self, X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, float)
-        u = np.zeros_like(X)
-        u[:, 0] = self.strain * (X[:, 0] - self.centre_x_mm)
-        return u
-
-
-def intersect_displaced(specimen: Specimen, motion: Motion, origins: np.ndarray,
-                        directions: np.ndarray, tol_mm: float = 1e-10, max_iter: int = 30,
-                        step_mm: float = 1e-4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Material points ``(x, y)`` whose displaced position lies on the rays, and the ray
-    parameters ``lam``: ``phi(x, y) = origins + lam directions`` with
-    ``phi(x, y) = X + motion(X)``, ``X = (x, y, height(x, y))``.
-
-    Vectorised Newton on the three unknowns ``(x, y, lam)``, started from the undeformed
-    surface (:func:`intersect_surface`); ``dphi/dx`` and ``dphi/dy`` by central
-    differences of ``step_mm`` (they only steer Newton: the converged point satisfies the
-    equation to ``tol_mm``). Rays not converged get NaN.
-    """
-    o = np.broadcast_to(np.asarray(origins, float), np.shape(directions))
-    d = np.asarray(directions, float)
-
-    def phi(x, y):
-        X = np.column_stack([x, y, specimen.height(x, y)])
-        return X + np.asarray(motion(X), float)
-
-    lam = intersect_surface(specimen, o, d)
-    x, y = o[:, 0] + lam * d[:, 0], o[:, 1] + lam * d[:, 1]
-    active = np.isfinite(lam)
-    for _ in range(max_iter):
-        F = phi(x[active], y[active]) - o[active] - lam[active, None] * d[active]
-        if not np.max(np.abs(F), initial=0.0) > tol_mm:
-            break
-        xa, ya = x[active], y[active]
-        a = (phi(xa + step_mm, ya) - phi(xa - step_mm, ya)) / (2.0 * step_mm)      # dphi/dx
-        b = (phi(xa, ya + step_mm) - phi(xa, ya - step_mm)) / (2.0 * step_mm)      # dphi/dy
-        c, r = -d[active], -F                                      # [a b c] delta = r (Cramer)
-        bc = np.cross(b, c)
-        with np.errstate(all="ignore"):
-            det = np.einsum("ij,ij->i", a, bc)
-            x[active] += np.einsum("ij,ij->i", r, bc) / det
-            y[active] += np.einsum("ij,ij->i", a, np.cross(r, c)) / det
-            lam[active] += np.einsum("ij,ij->i", r, np.cross(a, b)) / det
-        active &= np.isfinite(lam)
-    F = phi(x, y) - o - lam[:, None] * d
-    bad = ~(np.max(np.abs(F), axis=1) <= tol_mm)
-    if np.any(bad & np.isfinite(lam)):
-        logger.warning("displaced ray intersection: %d of %d rays did not converge",
-                       int(np.sum(bad & np.isfinite(lam))), lam.size)
-    lam[bad] = np.nan
-    return x, y, lam
 
 
 def _render_rows(specimen, camera, texture, rows, offsets, background, motion=None) -> np.ndarray:

@@ -81,15 +81,20 @@ from typing import Any
 
 import numpy as np
 
-from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.imaging.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDERS
+from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.residual.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG
 
-from georeg_app.config.toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean, check,
-                          existing_file, integer, load_toml, number, resolve_path,
-                          show, string, vector)
+from georeg_app.config.toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean,
+                                           check, existing_file, integer, load_toml, number,
+                                           resolve_path, show, string, vector)
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["METHOD_NAMES", "AUTO", "integer_or_auto", "lengths_or_auto", "GEOMETRY_KINDS",
+           "NORMALISATIONS", "DEFAULT_TIKHONOV_LENGTHS_MM", "DEFAULT_OUTPUT_DIR",
+           "ImagesConfig", "Landmark", "CAMERA_SOURCES", "CamerasConfig", "GeometryConfig",
+           "MethodConfig", "OutputConfig", "Config", "load_config"]
 
 METHOD_NAMES = ("fe", "tikhonov", "georeg")
 #: the value of ``levels`` and of a Tikhonov length chosen from the data

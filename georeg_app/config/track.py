@@ -49,10 +49,10 @@ from typing import Any
 
 from fesdic_core.displacement.driver import JACOBIANS
 
-from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig, OutputConfig,
-                     _cameras, _geometry, _images, _method)
+from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
+                                       OutputConfig, _cameras, _geometry, _images, _method)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
-                          load_toml, number, resolve_path, show, show_path, string)
+                                           load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
            "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY"]

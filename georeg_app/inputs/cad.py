@@ -35,8 +35,8 @@ import numpy as np
 
 from adapters.fesdic_core import NominalModel, nominal_model, part_model
 from georeg_plugin.io.iges import read_iges_surfaces
-from georeg_plugin.spline.conforming import conforming_faces
 from georeg_plugin.levels.multipatch import NonConformingFacesError
+from georeg_plugin.spline.conforming import conforming_faces
 from georeg_plugin.spline.trimmed import grid_triangles
 
 from georeg_plugin.io.cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available

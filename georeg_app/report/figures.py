@@ -26,6 +26,9 @@ from georeg_app.report.run_view import best_method, georeg_pair, is_failed, rms_
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["FE_ERROR_RATIO", "convergence", "multiscale_vs_monoscale", "shape_errors",
+           "make_figures"]
+
 FE_ERROR_RATIO = 0.3          # the shape claim: georeg error <= 0.3 x FE error
 
 

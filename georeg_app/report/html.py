@@ -27,9 +27,14 @@ import numpy as np
 
 from georeg_app.report.figures import FE_ERROR_RATIO
 from georeg_app.report.provenance import header_html
-from georeg_app.report.run_view import best_method, failure, georeg_main, georeg_pair, is_failed, rms_error_um
+from georeg_app.report.run_view import (best_method, failure, georeg_main, georeg_pair, is_failed,
+                                        rms_error_um)
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["TIME_RATIO", "RESIDUAL_RTOL", "FIGURE_CAPTIONS", "STYLESHEET", "Claim",
+           "shape_claim", "time_to_reach", "multiscale_claim", "check_claims",
+           "level_search_html", "methods_table_html", "report_html"]
 
 TIME_RATIO = 0.5              # multiscale in at most half the monoscale time (Fig. 11)
 RESIDUAL_RTOL = 1e-3          # "equal" residuals: within 0.1 % (relative) of each other

@@ -25,9 +25,14 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers the 3-D projection)
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from georeg_app.report.run_view import colour_range, failure, is_failed, measured, node_errors_um, succeeded
+from georeg_app.report.run_view import (colour_range, failure, is_failed, measured, node_errors_um,
+                                        succeeded)
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["DPI", "FAILED_GREY", "png", "grid", "bfp_frame", "nice_scale_factor",
+           "cmap_colours", "title", "plan_figure", "shape_maps", "residual_maps", "error_norm",
+           "error_maps", "uncertainty_maps"]
 
 DPI = 110
 FAILED_GREY = "0.45"

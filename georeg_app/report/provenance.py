@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from georeg_app import installed_version
 from georeg_app.report.run_view import failure, is_failed
+from georeg_app.version import installed_version
+
+__all__ = ["package_version", "config_toml", "inputs_html", "rig_html", "header_html"]
 
 
 def package_version(run) -> str:

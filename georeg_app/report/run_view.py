@@ -18,6 +18,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+__all__ = ["UM_PER_MM", "is_failed", "failure", "succeeded", "measured", "colour_range",
+           "rms_error_um", "node_errors_um", "best_method", "georeg_pair", "georeg_main"]
+
 UM_PER_MM = 1e3
 
 

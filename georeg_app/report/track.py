@@ -15,8 +15,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
-from georeg_app.report.maps import bfp_frame, png
 from georeg_app.report.html import STYLESHEET
+from georeg_app.report.maps import bfp_frame, png
 
 __all__ = ["series_figure", "maps_figure", "track_report_html"]
 

@@ -24,7 +24,8 @@ import os
 from pathlib import Path
 from typing import Callable, Sequence
 
-from georeg_app.series.track import FrameResult, SeriesReference, measure_frame
+from georeg_app.series.frames import FrameResult, chained_frame, measure_frame
+from georeg_app.series.reference import SeriesReference
 
 logger = logging.getLogger(__name__)
 
@@ -70,16 +71,6 @@ def _quiet_dask_loggers() -> None:
             logging.getLogger(name).setLevel(max(level, logging.getLogger(name).level))
 
 
-def _chained(reference: SeriesReference, index: int, paths: Sequence[Path],
-             previous: tuple | None) -> tuple:
-    """One frame of an incremental series: ``previous`` = (frame, last good U, its index)."""
-    U0, start = (None, 0) if previous is None else previous[1:]
-    frame = measure_frame(reference, index, paths, U0, start)
-    if frame.ok:
-        return frame, frame.U, index
-    return frame, U0, start
-
-
 def _frame_of(outcome: tuple) -> FrameResult:
     return outcome[0]
 
@@ -88,7 +79,7 @@ def run_series_dask(reference: SeriesReference, frames: Sequence[tuple[Path, Pat
                     incremental: bool, scheduler: str,
                     on_frame: Callable[[FrameResult], None] | None = None,
                     workers: int | None = None) -> list[FrameResult]:
-    """The frames on a Dask cluster, results in frame order (as :func:`track.run_series`)."""
+    """The frames on a Dask cluster, results in frame order (as :func:`georeg_app.series.track.run_series`)."""
     with dask_client(scheduler, workers) as client:
         shared = client.scatter(reference, broadcast=True)       # the reference, shipped once
         logger.info("Dask: %s, %d workers; the reference scattered once", scheduler,
@@ -97,7 +88,7 @@ def run_series_dask(reference: SeriesReference, frames: Sequence[tuple[Path, Pat
         previous = None
         for index, paths in enumerate(frames, start=1):
             if incremental:
-                previous = client.submit(_chained, shared, index, list(paths), previous,
+                previous = client.submit(chained_frame, shared, index, list(paths), previous,
                                          key=f"frame-{index}-{os.getpid()}-{id(frames)}")
                 futures.append(client.submit(_frame_of, previous, pure=False))
             else:

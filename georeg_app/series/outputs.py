@@ -22,8 +22,8 @@ import numpy as np
 
 from fesdic_core.fe.mesh_io import write_mesh
 
-from georeg_app.shape.outputs import OutputWriter, _json_ready
 from georeg_app.report.track import REPORT_FILE, track_report_html
+from georeg_app.shape.outputs import OutputWriter, _json_ready
 
 __all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "frame_file", "track_summary", "pvd_text", "write_track"]
 

@@ -40,6 +40,11 @@ from georeg_app.config.measure import AUTO
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["SUMMARY_FILE", "CONVERGENCE_FILE", "REPORT_FILE", "CONVERGENCE_COLUMNS",
+           "write_json_atomic", "OutputWriter", "safe_stem", "method_stems", "summary_dict",
+           "seen_fraction", "write_method_vtu", "convergence_rows", "write_convergence_csv",
+           "write_spline_outputs", "write_all"]
+
 SUMMARY_FILE = "summary.json"
 CONVERGENCE_FILE = "convergence.csv"
 REPORT_FILE = "report.html"

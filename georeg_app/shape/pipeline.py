@@ -13,47 +13,35 @@ import datetime
 import hashlib
 import logging
 import math
-import shutil
-import sys
-import tempfile
-import weakref
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
 
-from adapters.fesdic_core import (NominalModel, georeg_solver, measured_spline,
-                                  measured_spline_std, nominal_model)
+from adapters.fesdic_core import NominalModel, georeg_solver, measured_spline, measured_spline_std
 from adapters.level_search import LevelSearch, measure_auto_levels
-from fesdic_core.synthetic.accuracy import shape_error_to_surface
-from fesdic_core.shape.driver import (Measurement, MeasurementInputError, MeasurementSettings,
-                                check_scales, measure)
-from fesdic_core.shape.gauge import best_fit_plane_distance, move_cameras_with_specimen
+from fesdic_core.fe.mesh import MeshError, SurfaceMesh
 from fesdic_core.imaging.image import Image, read_image
-from fesdic_core.fe.mesh import MeshError, SurfaceMesh, validate_mesh
-from fesdic_core.fe.mesh_io import read_mesh
-from fesdic_core.synthetic.render import Specimen, demo_cameras, render_stereo, speckle_mm_for, twisted_plate
-from fesdic_core.cameras.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
-                             stereo_transform, write_cameras_json)
+from fesdic_core.shape.driver import (Measurement, MeasurementInputError, MeasurementSettings,
+                                      check_scales, measure)
+from fesdic_core.shape.gauge import best_fit_plane_distance
 from fesdic_core.solve.tikhonov import TikhonovSolver
-from georeg_plugin.spline.geometries import plate_with_hole, rectangle
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from georeg_plugin.spline.patch import SplinePatch
-from georeg_plugin.spline.refine import refine_to_elements
 
-from georeg_app import installed_version
-from georeg_app.inputs.cad import cad_faces, cad_model, cad_refinements
+from georeg_app.config.measure import AUTO, Config, GeometryConfig
+from georeg_app.inputs.cameras import load_cameras
+from georeg_app.inputs.nominal import MIN_PX_PER_ELEMENT, build_model, coarse_faces, refinements
+from georeg_app.shape.demo import Truth
+from georeg_app.shape.methods import MethodSpec
 from georeg_app.shape.visibility import scene_occluders, visibility_settings
-from georeg_app.config.measure import (AUTO, CamerasConfig, Config, GeometryConfig, ImagesConfig, MethodConfig,
-                     OutputConfig)
-from georeg_app.shape.methods import MethodSpec, default_specs  # noqa: F401 (the pipeline's contract)
+from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
 
-#: the demo specimen (paper, section 4: 180 x 50 mm plate, hole 28 mm, seen over 100 mm)
-DEMO = dict(length_mm=180.0, width_mm=50.0, view_mm=100.0, hole_radius_mm=14.0,
-            corner_mm=1.0, waviness_mm=0.2, noise_std=2.0, image_size=(1224, 816),
-            field_mm=112.0, stereo_angle_deg=25.0, pose_error_deg=0.5, pose_error_mm=0.5)
+__all__ = ["MethodResult", "RunResult", "check_sizes", "check_levels", "input_files",
+           "run_methods"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -102,89 +90,6 @@ class RunResult:
     started: str = ""
 
 
-@dataclasses.dataclass(frozen=True, eq=False)
-class Truth:
-    """What a synthetic run knows: the actual surface and the exact cameras."""
-
-    specimen: Specimen
-    cameras: tuple
-
-
-# ----------------------------------------------------------------------------- inputs
-def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
-    """Initial cameras: the JSON file as is, or another tool's calibration (pyvale, OpenCV,
-    VIC-3D, DICe) whose stereo relation is kept and posed by the landmarks."""
-    from fesdic_core.cameras.io.formats import read_dice, read_opencv_stereo, read_vic3d
-    if cameras.file is not None:
-        cams = read_cameras_json(cameras.file)
-        if len(cams) != 2:
-            raise ValueError(f"{cameras.file}: a stereo pair needs 2 cameras, got {len(cams)}")
-        return cams
-    size = [(im.shape[1], im.shape[0]) for im in images]
-    if cameras.opencv is not None:
-        cam0, cam1 = read_opencv_stereo(cameras.opencv, size)
-    elif cameras.vic3d is not None:
-        cam0, cam1 = read_vic3d(cameras.vic3d, size)
-    elif cameras.dice is not None:
-        cam0, cam1 = read_dice(cameras.dice)
-    else:
-        cam0, cam1 = read_pyvale_csv(cameras.pyvale_csv, size)
-    R, t = stereo_transform(cam0, cam1)
-    xyz = np.array([lm.xyz_mm for lm in cameras.landmarks])
-    px0 = np.array([lm.cam0_px for lm in cameras.landmarks])
-    px1 = np.array([lm.cam1_px for lm in cameras.landmarks])
-    return list(initial_rig_pose(cam0, cam1, xyz, px0, px1, R, t))
-
-
-def coarse_patch(geometry: GeometryConfig) -> SplinePatch:
-    """The coarsest nominal spline (the CAD model) of ``[geometry]``."""
-    if geometry.kind == "plate_with_hole":
-        return plate_with_hole(geometry.length_mm, geometry.width_mm, geometry.hole_radius_mm)
-    if geometry.kind == "rectangle":
-        patch = rectangle(geometry.length_mm, geometry.width_mm)
-        aspect = geometry.length_mm / geometry.width_mm
-        n_u, n_v = (max(1, round(aspect)), 1) if aspect >= 1 else (1, max(1, round(1 / aspect)))
-        return patch if (n_u, n_v) == (1, 1) else refine_to_elements(patch, n_u, n_v)[0]
-    raise ValueError(f"[geometry] kind {geometry.kind!r} has no spline of its own")
-
-
-MIN_PX_PER_ELEMENT = 16     # pixels an FE element needs at full resolution (9 Q9 nodes)
-
-
-def _coarse_faces(geometry: GeometryConfig) -> tuple:
-    """The coarsest splines: the CAD's selected faces, or the plate's one patch."""
-    if geometry.kind == "cad":
-        return cad_faces(geometry.file, geometry.faces)[0]
-    return (coarse_patch(geometry),)
-
-
-def _refinements(geometry: GeometryConfig, levels: int) -> int:
-    """Dyadic refinements from the coarsest spline to the FE mesh (see :func:`build_model`)."""
-    return cad_refinements(_coarse_faces(geometry), geometry.elements, levels)
-
-
-def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
-    """Nominal spline and analysis-suitable Q9 mesh (Eq. 17), or a legacy mesh read from file.
-
-    The FE mesh refines the finest spline level dyadically until it has about
-    ``geometry.elements`` elements (default: at least 1000, the paper's mesh).
-    """
-    if geometry.kind == "mesh":
-        mesh = read_mesh(geometry.file)
-        validate_mesh(mesh, str(geometry.file))                   # errors name the file
-        lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
-        if hi[2] - lo[2] > 1e-6 * np.ptp(mesh.nodes[:, :2]):
-            raise ValueError(f"{geometry.file}: kind = 'mesh' takes a flat mesh in z = 0 "
-                             f"(z spans {lo[2]:g}..{hi[2]:g} mm)")
-        size = hi - lo
-        patch = rectangle(size[0], size[1], center=tuple((lo + hi)[:2] / 2))
-        return NominalModel(patch=patch, mesh=mesh, uv=None)       # point inversion (Remark 6)
-    if geometry.kind == "cad":
-        return cad_model(geometry.file, geometry.faces, geometry.elements, levels)
-    return nominal_model(coarse_patch(geometry), _refinements(geometry, levels), "Q9",
-                         name=geometry.kind)
-
-
 # ----------------------------------------------------------------------------- methods
 def _solver(spec: MethodSpec, model: NominalModel):
     if spec.name == "fe":
@@ -222,14 +127,14 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
     if config.geometry.kind == "mesh":
         return
     levels = config.method.fixed_levels
-    coarse = sum(int(np.prod(f.n_elements)) for f in _coarse_faces(config.geometry))
+    coarse = sum(int(np.prod(f.n_elements)) for f in coarse_faces(config.geometry))
     asked = config.geometry.elements
     if asked is not None and coarse * 4 ** (levels - 1) > 2 * asked:
         raise ValueError(
             f"[geometry] elements = {asked}: {levels} spline levels need an FE mesh of at least "
             f"{coarse * 4 ** (levels - 1)} elements (each level halves the knot spans of the "
             f"next); ask for more elements or fewer levels")
-    elements = coarse * 4 ** _refinements(config.geometry, levels)
+    elements = coarse * 4 ** refinements(config.geometry, levels)
     if elements > (w * h) / MIN_PX_PER_ELEMENT:
         largest = max(1, int(math.log((w * h) / MIN_PX_PER_ELEMENT / coarse, 4)) + 1)
         raise ValueError(
@@ -374,48 +279,3 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
                      inputs=input_files(config), version=installed_version(), started=started)
 
 
-# ----------------------------------------------------------------------------- demo
-def demo_specimen() -> Specimen:
-    """The paper's twisted open-hole specimen (section 4.2), with a smooth waviness."""
-    return twisted_plate(DEMO["length_mm"], DEMO["width_mm"], corner_mm=DEMO["corner_mm"],
-                         hole_radius_mm=DEMO["hole_radius_mm"], waviness_mm=DEMO["waviness_mm"],
-                         view_length_mm=DEMO["view_mm"], seed=7)
-
-
-def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
-    """Render the demo stereo pair and return its config, images and truth.
-
-    Two cameras at 25 degrees, about 1 Mpx each, 4 px speckle, noise of 2 gray levels.
-    The cameras of the config are the exact ones with the specimen pose perturbed by
-    0.5 degree and 0.5 mm (the fixed point must find it). They are written to a temporary
-    folder (the output folder only receives the results) that belongs to the returned
-    ``config.cameras`` (shared by copies such as ``config.with_output_dir``): it is removed
-    when that is no longer referenced (at the end of the run), at the latest at exit.
-    """
-    cams = demo_cameras(image_size=DEMO["image_size"], stereo_angle_deg=DEMO["stereo_angle_deg"],
-                        field_mm=DEMO["field_mm"])
-    specimen = dataclasses.replace(demo_specimen(), speckle_mm=speckle_mm_for(cams[0], 4.0))
-    arrays = render_stereo(specimen, cams, supersample=3, noise_std=DEMO["noise_std"], seed=11,
-                           progress=logger.isEnabledFor(logging.INFO) and sys.stderr.isatty())
-    method = MethodConfig()
-    images = tuple(Image.from_array(a, source=f"demo cam{k}", prefilter_px=method.prefilter_px,
-                                    order=method.interpolation_order) for k, a in enumerate(arrays))
-    rotation = np.radians(DEMO["pose_error_deg"]) * np.array([0.6, -0.48, 0.64])
-    translation = DEMO["pose_error_mm"] * np.array([0.48, 0.64, -0.6])
-    initial = move_cameras_with_specimen(cams, translation, rotation, np.zeros(3))
-    inputs = Path(tempfile.mkdtemp(prefix="georeg_demo_"))
-    try:
-        write_cameras_json(inputs / "cameras.json", initial)
-    except BaseException:
-        shutil.rmtree(inputs, ignore_errors=True)
-        raise
-    config = Config(
-        images=ImagesConfig(cam0=inputs / "cam0 (rendered in memory)", cam1=inputs / "cam1 (rendered in memory)"),
-        cameras=CamerasConfig(file=inputs / "cameras.json"),
-        geometry=GeometryConfig(kind="plate_with_hole", length_mm=DEMO["view_mm"],
-                                width_mm=DEMO["width_mm"], hole_radius_mm=DEMO["hole_radius_mm"]),
-        method=method,
-        output=OutputConfig(dir=Path(out_dir)),
-        source=inputs / "demo (embedded)")
-    weakref.finalize(config.cameras, shutil.rmtree, inputs, ignore_errors=True)  # kept by copies
-    return config, images, Truth(specimen=specimen, cameras=tuple(cams))

@@ -11,8 +11,8 @@ import numpy as np
 from adapters.fesdic_core import NominalModel, is_curved
 from fesdic_core.residual.visibility import VisibilitySettings
 
-from georeg_app.inputs.cad import cad_occluders
 from georeg_app.config.measure import GeometryConfig, MethodConfig
+from georeg_app.inputs.cad import cad_occluders
 
 __all__ = ["visibility_settings", "scene_occluders"]
 

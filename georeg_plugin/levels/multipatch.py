@@ -34,8 +34,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from georeg_plugin.levels.curved import RANK_RTOL, VectorLevel, vector_gluing, vector_level
-from georeg_plugin.spline.fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
 from georeg_plugin.levels.operators import MultilevelSpace, extraction_operator
+from georeg_plugin.spline.fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
 from georeg_plugin.spline.patch import SplinePatch, invert_points
 from georeg_plugin.spline.refine import refine_uniform
 from georeg_plugin.spline.trimmed import trim_mesh

@@ -18,7 +18,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from georeg_plugin.spline.bspline import compact_basis, greville, n_functions, span_breaks, validate_knots
+from georeg_plugin.spline.bspline import (compact_basis, greville, n_functions, span_breaks,
+                                          validate_knots)
 
 logger = logging.getLogger(__name__)
 

@@ -5,14 +5,14 @@ import pytest
 from numpy.testing import assert_allclose
 
 from adapters.fesdic_core import georeg_solver, nominal_model
-from fesdic_core.synthetic.accuracy import shape_error_to_surface
-from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.fe.mesh import boundary_nodes, nodal_areas, rectangle_mesh
 from fesdic_core.fe.mesh_io import read_mesh, write_mesh
-from georeg_plugin.spline.fe_mesh import ElementDegreeError
-from georeg_plugin.spline.geometries import plate_with_hole, quadrilateral, rectangle
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from georeg_plugin.levels.operators import multilevel_space, node_parameters
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.fe_mesh import ElementDegreeError
+from georeg_plugin.spline.geometries import plate_with_hole, quadrilateral, rectangle
 
 L, W = 60.0, 40.0
 CORNERS = [[-L / 2, -W / 2, 0.0], [L / 2, -W / 2, 0.0], [L / 2, W / 2, 0.0], [-L / 2, W / 2, 0.0]]

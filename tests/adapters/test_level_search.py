@@ -5,9 +5,10 @@ import scipy.sparse as sps
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
 from adapters.level_search import _move_to, ladder
-from georeg_plugin.spline.geometries import plate_with_hole, rectangle
-from georeg_plugin.levels.selection import information_criterion, noise_gain, penalty_per_dof, predicted_fit
+from georeg_plugin.levels.selection import (information_criterion, noise_gain, penalty_per_dof,
+                                            predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.spline.geometries import plate_with_hole, rectangle
 
 
 def test_ladder_of_a_dyadic_mesh_is_the_paper_space_plus_nothing():
@@ -121,8 +122,8 @@ def test_ladder_takes_the_formulation_of_the_nominal():
     the scalar space on a cylinder (it holds the rigid normal motions), the vector one on a
     doubly curved face (the scalar space misses them by 7e-4): equal operators level by
     level, and the rigid normal modes inside every level of the doubly curved ladder."""
-    from fesdic_core.shape.gauge import rigid_normal_modes
     from fesdic_core.fe.mesh import node_normals
+    from fesdic_core.shape.gauge import rigid_normal_modes
     from georeg_plugin.spline.geometries import cylinder
     from georeg_plugin.spline.patch import SplinePatch
     U, V = np.meshgrid(np.linspace(-20, 20, 3), np.linspace(-15, 15, 3), indexing="ij")

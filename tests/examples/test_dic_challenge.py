@@ -35,7 +35,7 @@ from fesdic_core.imaging.image import read_image                             # n
 from fesdic_core.cameras.rig import write_cameras_json                       # noqa: E402
 from georeg_app import cli                                           # noqa: E402
 from georeg_app.config.measure import load_config                            # noqa: E402
-from georeg_app.shape.pipeline import load_cameras                         # noqa: E402
+from georeg_app.inputs.cameras import load_cameras  # noqa: E402
 
 PART = HERE / "specimen_part.toml"
 #: spline levels of the half-resolution part (see the module docstring)

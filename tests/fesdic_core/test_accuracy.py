@@ -2,9 +2,10 @@
 import cv2
 import numpy as np
 
-from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
 from fesdic_core.shape.gauge import move_cameras_with_specimen
-from fesdic_core.synthetic.render import demo_cameras, true_surface_points, twisted_plate
+from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
+from fesdic_core.synthetic.render import demo_cameras, true_surface_points
+from fesdic_core.synthetic.specimen import twisted_plate
 
 SPECIMEN = twisted_plate(60.0, 40.0, corner_mm=0.5, speckle_mm=0.4, seed=3)
 CAMERAS = demo_cameras(image_size=(640, 480), field_mm=72.0)

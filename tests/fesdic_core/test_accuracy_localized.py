@@ -4,7 +4,6 @@ The accuracy of every synthetic test rests on this function: it must not report 
 as exact when the truth has a bump.
 """
 import numpy as np
-import pytest
 
 from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from scenes import bump_specimen

@@ -5,7 +5,7 @@ import stat
 import pytest
 
 from fesdic_core.atomic import (DEFAULT_UMASK, atomic_path, process_umask, public_mode,
-                                 temporary_folder, write_bytes_atomic, write_text_atomic)
+                                temporary_folder, write_bytes_atomic, write_text_atomic)
 
 
 def _mode(path):

@@ -5,17 +5,17 @@ import numpy as np
 import pytest
 
 import fesdic_core.shape.calibration as calibration
-from fesdic_core.synthetic.accuracy import stereo_correspondence_error
-from fesdic_core.shape.calibration import (_parameter_gradients, calibrate_extrinsics,
-                                     rigid_rig_gradients, truncated_solve)
-from fesdic_core.shape.gauge import move_cameras_with_specimen, pose_directions, tangential_motions
-from fesdic_core.imaging.image import pyramid
+from fesdic_core.cameras.rig import stereo_extrinsic_jacobian, stereo_transform
 from fesdic_core.fe.mesh import node_normals, rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import true_normal_offset
+from fesdic_core.imaging.image import pyramid
 from fesdic_core.residual.graylevel import gray_level_residual
-from fesdic_core.cameras.rig import stereo_extrinsic_jacobian, stereo_transform
+from fesdic_core.shape.calibration import (_parameter_gradients, calibrate_extrinsics,
+                                           rigid_rig_gradients, truncated_solve)
+from fesdic_core.shape.gauge import move_cameras_with_specimen, pose_directions, tangential_motions
 from fesdic_core.shape.operators import current_nodes
+from fesdic_core.synthetic.accuracy import stereo_correspondence_error
+from fesdic_core.synthetic.render import true_normal_offset
 
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree
 TRANSLATION = np.array([0.6, -0.48, 0.64])                                # 1 mm

@@ -15,10 +15,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fesdic_core.cameras.io.formats import (read_dice, read_opencv_stereo, read_vic3d,
-                                             rotation_from_angles_deg, write_opencv_stereo)
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.cameras.rig import CalibrationError, read_cameras_json, stereo_transform, write_cameras_json
+from fesdic_core.cameras.io.formats import (read_dice, read_opencv_stereo, read_vic3d,
+                                            rotation_from_angles_deg, write_opencv_stereo)
+from fesdic_core.cameras.rig import (CalibrationError, read_cameras_json, stereo_transform,
+                                     write_cameras_json)
 
 SIZE = (640, 480)
 K0 = np.array([[1500.0, 0.0, 322.5], [0.0, 1502.0, 241.0], [0.0, 0.0, 1.0]])

@@ -10,20 +10,21 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from fesdic_core.displacement.driver import (DisplacementSettings, displacement_reference,
-                                      measure_displacement)
 from fesdic_core.displacement import residual as displacement_residual_module
+from fesdic_core.displacement.driver import (DisplacementSettings, displacement_reference,
+                                             measure_displacement)
 from fesdic_core.displacement.residual import (chi_square, displacement_operators,
                                                displacement_residual, displacement_rhs,
                                                reference_view)
 from fesdic_core.displacement.solvers import ComponentTikhonovSolver, componentwise
 from fesdic_core.displacement.strain import surface_green_lagrange
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import (BendingMotion, RigidMotion, StretchMotion, demo_cameras,
-                                flat_plate, render_stereo, speckle_mm_for)
+from fesdic_core.imaging.image import Image
 from fesdic_core.solve.solvers import DirectSolver, StepSolver, sparse_solve
+from fesdic_core.synthetic.motion import BendingMotion, RigidMotion, StretchMotion
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import flat_plate
 
 RIGID = RigidMotion((0.3, -0.2, 0.1), rvec=(0.0, 0.003, 0.002))
 STRETCH = StretchMotion(0.005)

@@ -19,12 +19,13 @@ the true camera 1 sees the material point that the estimated camera 0 shows at t
 import numpy as np
 import pytest
 
-from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
-from fesdic_core.shape.driver import Measurement, MeasurementInputError, MeasurementSettings, measure
-from fesdic_core.shape.gauge import move_cameras_with_specimen
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.imaging.image import Image
+from fesdic_core.shape.driver import (Measurement, MeasurementInputError, MeasurementSettings,
+                                      measure)
+from fesdic_core.shape.gauge import move_cameras_with_specimen
 from fesdic_core.solve.solvers import DirectSolver
+from fesdic_core.synthetic.accuracy import shape_error_to_surface, stereo_correspondence_error
 
 MAX_DEVIATION_MM = 0.5
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree

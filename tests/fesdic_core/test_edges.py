@@ -3,12 +3,13 @@ import numpy as np
 import pytest
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.shape.driver import MeasurementSettings, measure
-from fesdic_core.residual.edges import boundary_samples, edge_distance_px, edge_margin_mask
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import boundary_nodes, rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import demo_cameras, flat_plate, render_stereo, speckle_mm_for
+from fesdic_core.imaging.image import Image
+from fesdic_core.residual.edges import boundary_samples, edge_distance_px, edge_margin_mask
+from fesdic_core.shape.driver import MeasurementSettings, measure
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import flat_plate
 from shape_truth import bounded_shape_error, rms
 
 F_PX, DEPTH_MM = 800.0, 400.0

@@ -12,10 +12,10 @@ positive nodal areas, below).
 import numpy as np
 import pytest
 
-from fesdic_core.synthetic.accuracy import shape_error_to_surface
+from fesdic_core.fe.mesh import rectangle_mesh
 from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.shape.gauge import move_cameras_with_specimen
-from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.synthetic.accuracy import shape_error_to_surface
 
 MAX_DEVIATION_MM = 0.5
 ROTATION = np.deg2rad(1.0) * np.array([1.0, 2.0, -1.0]) / np.sqrt(6.0)   # 1 degree

@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 
 from fesdic_core.fe.elements import FAMILIES as FAMILIES_BY_NAME
-from fesdic_core.shape.gauge import (best_fit_plane_distance, move_cameras_with_specimen, rigid_align,
-                               rigid_normal_modes, split_rigid_part, tangential_motions,
-                               transfer_rigid_part)
 from fesdic_core.fe.mesh import (CellBlock, SurfaceMesh, element_areas, nodal_areas, node_normals,
-                              rectangle_mesh)
+                                 rectangle_mesh)
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import demo_cameras
+from fesdic_core.shape.gauge import (best_fit_plane_distance, move_cameras_with_specimen,
+                                     rigid_align, rigid_normal_modes, split_rigid_part,
+                                     tangential_motions, transfer_rigid_part)
 from fesdic_core.shape.operators import current_nodes
+from fesdic_core.synthetic.render import demo_cameras
 
 
 def _nodal_weights(mesh):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from fesdic_core.cameras.camera import Camera
 from fesdic_core import parallel
+from fesdic_core.cameras.camera import Camera
 from fesdic_core.imaging import bspline3, image as image_module
 from fesdic_core.imaging.image import DEFAULT_PREFILTER_PX, Image, ImageError, pyramid, read_image
 

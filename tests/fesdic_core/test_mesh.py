@@ -4,8 +4,8 @@ import pytest
 
 from fesdic_core.fe.elements import FAMILIES, centroid
 from fesdic_core.fe.mesh import (CellBlock, MeshError, SurfaceMesh, boundary_nodes, edges,
-                              element_areas, map_points, node_normals, rectangle_mesh,
-                              surface_jacobian, tangents, validate_mesh)
+                                 element_areas, map_points, node_normals, rectangle_mesh,
+                                 surface_jacobian, tangents, validate_mesh)
 
 ALL = ["T3", "T6", "Q4", "Q9"]
 

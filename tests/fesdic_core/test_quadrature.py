@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
 
-from fesdic_core.fe.elements import FAMILIES
 from fesdic_core.fe.mesh import element_areas, rectangle_mesh
 from fesdic_core.fe.quadrature import _subcell_centres, pixel_quadrature, subdivisions
 from fesdic_core.synthetic.render import demo_cameras

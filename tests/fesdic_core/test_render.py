@@ -9,19 +9,10 @@ from numpy.testing import assert_allclose
 from scipy import ndimage
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.synthetic.render import (
-    GRAY_RANGE,
-    Specimen,
-    demo_cameras,
-    flat_plate,
-    intersect_surface,
-    pixel_rays,
-    render_stereo,
-    speckle_mm_for,
-    true_normal_offset,
-    true_surface_points,
-    twisted_plate,
-)
+from fesdic_core.synthetic.rays import intersect_surface, pixel_rays
+from fesdic_core.synthetic.render import (GRAY_RANGE, demo_cameras, render_stereo, speckle_mm_for,
+                                          true_normal_offset, true_surface_points)
+from fesdic_core.synthetic.specimen import Specimen, flat_plate, twisted_plate
 
 DIST = np.array([-0.08, 0.02, 4e-4, -3e-4, 0.01])
 

@@ -2,9 +2,11 @@
 import numpy as np
 import pytest
 
-from fesdic_core.synthetic.render import (BendingMotion, RigidMotion, Specimen, StretchMotion, demo_cameras,
-                                flat_plate, intersect_displaced, pixel_rays, render_stereo,
-                                speckle_texture)
+from fesdic_core.synthetic.motion import (BendingMotion, RigidMotion, StretchMotion,
+                                          intersect_displaced)
+from fesdic_core.synthetic.rays import pixel_rays
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_texture
+from fesdic_core.synthetic.specimen import Specimen, flat_plate
 
 CAMERAS = demo_cameras(image_size=(96, 72), field_mm=40.0)
 

@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from fesdic_core.imaging.image import Image
-from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals, rectangle_mesh
 from fesdic_core.fe.elements import FAMILIES
+from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals, rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import true_normal_offset
+from fesdic_core.imaging.image import Image
 from fesdic_core.residual.graylevel import gray_level_residual
 from fesdic_core.shape.operators import current_nodes
+from fesdic_core.synthetic.render import true_normal_offset
 
 
 def _two_separate_elements():

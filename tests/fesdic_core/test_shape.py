@@ -3,11 +3,12 @@ import pytest
 
 from fesdic_core.fe.mesh import node_normals, rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import true_normal_offset
 from fesdic_core.residual.graylevel import gray_level_residual
 from fesdic_core.shape.operators import (GaussNewtonLog, chi_square_change, current_nodes,
-                               predicted_chi_square_change, shape_gauss_newton, shape_operators)
+                                         predicted_chi_square_change, shape_gauss_newton,
+                                         shape_operators)
 from fesdic_core.solve.solvers import DirectSolver, StepSolver
+from fesdic_core.synthetic.render import true_normal_offset
 
 
 def _objective(q, mesh, normals, quad, images, cameras):

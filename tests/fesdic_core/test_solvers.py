@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sps
 
 from fesdic_core.solve.solvers import (CachedFactorization, DirectSolver, SingularSystemError,
-                                 sparse_factor, sparse_solve)
+                                       sparse_factor, sparse_solve)
 
 
 def _spd(n, seed=0):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from scenes import BUMP
-from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.fe.mesh import rectangle_mesh
+from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.solve.tikhonov import TikhonovSolver, tikhonov_weight
 from shape_truth import bounded_shape_error, rms
 

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sps
 
-from fesdic_core.shape.driver import MeasurementSettings, measure
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import nodal_areas, rectangle_mesh
+from fesdic_core.imaging.image import Image
+from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.shape.gauge import rigid_normal_modes
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
-from fesdic_core.solve.solvers import DirectSolver, inverse_covariance
 from fesdic_core.shape.uncertainty import shape_std
+from fesdic_core.solve.solvers import DirectSolver, inverse_covariance
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
 from scenes import bump_specimen
 
 

@@ -6,17 +6,18 @@ import numpy as np
 import pytest
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.fe.elements import FAMILIES
-from fesdic_core.imaging.image import Image
 from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
-from fesdic_core.synthetic.render import look_at, pixel_rays
+from fesdic_core.imaging.image import Image
+from fesdic_core.residual.visibility import (TOLERANCE_FRACTION, VisibilitySettings,
+                                             embree_available, median_edge_mm, occluded,
+                                             point_normals, surface_triangles, visibility_mask)
+from fesdic_core.shape.driver import MeasurementSettings, measure
 from fesdic_core.solve.solvers import SingularSystemError
 from fesdic_core.solve.tikhonov import TikhonovSolver
-from fesdic_core.residual.visibility import (TOLERANCE_FRACTION, VisibilitySettings, embree_available,
-                                    median_edge_mm, occluded, point_normals, surface_triangles,
-                                    visibility_mask)
+from fesdic_core.synthetic.rays import pixel_rays
+from fesdic_core.synthetic.render import look_at
 from shape_truth import bounded_shape_error, rms
 
 NO_ANGLE = VisibilitySettings(max_view_angle_deg=None, margin_px=0.0)     # the exact triangles

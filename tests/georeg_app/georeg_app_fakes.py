@@ -11,8 +11,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.shape.gauge import best_fit_plane_distance
 from fesdic_core.fe.mesh import SurfaceMesh, rectangle_mesh
+from fesdic_core.shape.gauge import best_fit_plane_distance
 
 
 @dataclass(frozen=True)

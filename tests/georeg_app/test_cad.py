@@ -15,10 +15,12 @@ import pytest
 from fesdic_core.fe.elements import family_from_meshio
 from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, boundary_nodes
 from georeg_app import cli
-from georeg_app.config.measure import (CamerasConfig, Config, ConfigError, GeometryConfig, ImagesConfig,
-                               MethodConfig, OutputConfig, load_config)
+from georeg_app.config.measure import (CamerasConfig, Config, ConfigError, GeometryConfig,
+                                       ImagesConfig, MethodConfig, OutputConfig, load_config)
 from georeg_app.shape.methods import MethodSpec, georeg_spec, tikhonov_spec
-from georeg_app.shape.pipeline import Truth, build_model, run_methods
+from georeg_app.inputs.nominal import build_model
+from georeg_app.shape.demo import Truth
+from georeg_app.shape.pipeline import run_methods
 from georeg_plugin.io.iges import read_iges_surfaces
 from georeg_plugin.io.spline_io import read_part_json, write_iges
 from scenes import cad_nominal, cad_scene

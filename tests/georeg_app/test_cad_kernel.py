@@ -278,8 +278,8 @@ def test_box_with_fillet_is_one_part_welded_everywhere_but_along_the_trimmed_arc
     same knots, the surfaces unchanged, and the 7 faces mesh as one part (before: refused,
     NonConformingFacesError). The mesh's free edges are only where the trimmed end faces meet
     the fillet along their trimming arc (a staircase, not welded), within two elements of it."""
-    from georeg_plugin.spline.patch import invert_points
     from fesdic_core.fe.mesh import boundary_nodes
+    from georeg_plugin.spline.patch import invert_points
     read = read_cad_faces(DATA / "box_fillet.step")
     part = cad_part(DATA / "box_fillet.step")
     for f, g in zip(read, part):

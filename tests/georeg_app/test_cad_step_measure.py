@@ -15,12 +15,14 @@ import pytest
 
 pytest.importorskip("OCP")
 
-from fesdic_core.synthetic.render import Specimen, demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for  # noqa: E402
+from fesdic_core.synthetic.specimen import Specimen
 from georeg_app import cli                                                     # noqa: E402
 from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,  # noqa: E402
                                MethodConfig, OutputConfig)
 from georeg_app.shape.methods import MethodSpec, georeg_spec, tikhonov_spec         # noqa: E402
-from georeg_app.shape.pipeline import Truth, run_methods                              # noqa: E402
+from georeg_app.shape.demo import Truth  # noqa: E402
+from georeg_app.shape.pipeline import run_methods
 from shape_truth import bounded_shape_error, rms                                # noqa: E402
 from scenes import Scene, cad_scene                                             # noqa: E402
 from user_data import write_user_data                                           # noqa: E402

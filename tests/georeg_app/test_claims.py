@@ -16,7 +16,7 @@ import pytest
 from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from georeg_app import cli
 from georeg_app.report import html as report
-from georeg_app.shape import pipeline
+from georeg_app.shape import demo, pipeline
 from georeg_app.config.measure import MethodConfig
 from georeg_app.report.figures import georeg_pair
 from shape_truth import bounded_shape_error, rms
@@ -116,8 +116,8 @@ def demo_run(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("demo") / "out"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setitem(pipeline.DEMO, "image_size", (612, 408))
-        mp.setattr(pipeline, "MethodConfig", functools.partial(MethodConfig, scales=2))
+        mp.setitem(demo.DEMO, "image_size", (612, 408))
+        mp.setattr(demo, "MethodConfig", functools.partial(MethodConfig, scales=2))
         mp.setattr(pipeline, "run_methods", keep)
         assert cli.main(["-q", "demo", "--out", str(out)]) == 0
     (run,) = runs

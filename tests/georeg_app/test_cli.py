@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-import georeg_app
 from georeg_app import cli
 from georeg_app_fakes import FakeSpec, fake_run
 
@@ -106,9 +105,9 @@ def fake_pipeline(monkeypatch):
         calls["demo_out"] = out_dir
         return "demo-config", "demo-images", "demo-truth"
 
-    module.default_specs, module.run_methods, module.demo_config = default_specs, run_methods, demo_config
-    monkeypatch.setitem(sys.modules, "georeg_app.shape.pipeline", module)
-    monkeypatch.setattr(georeg_app, "pipeline", module, raising=False)
+    monkeypatch.setattr("georeg_app.shape.methods.default_specs", default_specs)
+    monkeypatch.setattr("georeg_app.shape.pipeline.run_methods", run_methods)
+    monkeypatch.setattr("georeg_app.shape.demo.demo_config", demo_config)
     monkeypatch.setattr("georeg_app.shape.outputs.make_figures", lambda run: {"convergence": b"\x89PNG"},
                         raising=False)
     monkeypatch.setattr("georeg_app.report.figures.make_figures", lambda run: {"convergence": b"\x89PNG"})

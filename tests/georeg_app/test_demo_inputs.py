@@ -1,11 +1,11 @@
-"""georeg_app.shape.pipeline.demo_config: the demo's temporary inputs are removed after the run."""
+"""georeg_app.shape.demo.demo_config: the demo's temporary inputs are removed after the run."""
 import gc
 import tempfile
 
 import numpy as np
 
 from fesdic_core.cameras.rig import read_cameras_json
-from georeg_app.shape import pipeline
+from georeg_app.shape import demo
 
 
 def _cheap_render(specimen, cams, **kwargs):
@@ -17,8 +17,8 @@ def test_demo_setup_leaves_no_folder_behind(tmp_path, monkeypatch):
     scratch = tmp_path / "tmp"
     scratch.mkdir()
     monkeypatch.setattr(tempfile, "tempdir", str(scratch))
-    monkeypatch.setattr(pipeline, "render_stereo", _cheap_render)
-    config, images, truth = pipeline.demo_config(tmp_path / "out")
+    monkeypatch.setattr(demo, "render_stereo", _cheap_render)
+    config, images, truth = demo.demo_config(tmp_path / "out")
     moved = config.with_output_dir(tmp_path / "elsewhere")          # a copy keeps the inputs
     del config
     gc.collect()

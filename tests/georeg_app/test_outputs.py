@@ -9,7 +9,7 @@ import pytest
 
 from georeg_app.shape import outputs
 from georeg_app.shape.outputs import (OutputWriter, summary_dict, write_all, write_bytes_atomic,
-                                write_json_atomic, write_text_atomic)
+                                      write_json_atomic, write_text_atomic)
 from georeg_app_fakes import fake_run
 
 SCHEMA = {"name": str, "param": (float, str, type(None)), "shape_rms_error_mm": (float, type(None)),

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from georeg_app.report import figures, maps
-from georeg_app.report.provenance import config_toml
 from georeg_app.report.html import check_claims, report_html, time_to_reach
+from georeg_app.report.provenance import config_toml
 from georeg_app.report.run_view import best_method, colour_range, is_failed
 from georeg_app_fakes import FAILURE, FAKE_INPUTS, fake_run, history
 
@@ -197,7 +197,7 @@ def test_header_lists_inputs_with_checksums_config_rig_version():
 
 def test_config_toml_reads_back():
     from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,
-                                   MethodConfig, OutputConfig)
+                                           MethodConfig, OutputConfig)
     config = Config(images=ImagesConfig(Path("/d/left.tif"), Path("/d/right.tif")),
                     cameras=CamerasConfig(file=Path("/d/cameras.json")),
                     geometry=GeometryConfig(kind="rectangle", length_mm=100.0, width_mm=50.0),

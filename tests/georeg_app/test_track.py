@@ -18,8 +18,9 @@ import pytest
 
 from fesdic_core.fe.mesh import rectangle_mesh
 from fesdic_core.fe.mesh_io import write_mesh
-from fesdic_core.synthetic.render import (RigidMotion, StretchMotion, demo_cameras, flat_plate,
-                                render_stereo, speckle_mm_for)
+from fesdic_core.synthetic.motion import RigidMotion, StretchMotion
+from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
+from fesdic_core.synthetic.specimen import flat_plate
 from fesdic_core.cameras.rig import write_cameras_json
 from georeg_app import cli
 
@@ -147,8 +148,8 @@ def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
 
 def _write_halves(folder):
     """The plate as a CAD part: its two halves, IGES faces sharing the edge x = 0."""
-    from georeg_plugin.spline.geometries import quadrilateral
     from georeg_plugin.io.spline_io import write_iges
+    from georeg_plugin.spline.geometries import quadrilateral
     halves = [quadrilateral([[-22, -15, 0], [0, -15, 0], [0, 15, 0], [-22, 15, 0]], (2, 2)),
               quadrilateral([[0, -15, 0], [22, -15, 0], [22, 15, 0], [0, 15, 0]], (2, 2))]
     write_iges(folder / "halves.igs", halves, names=["left", "right"])
@@ -321,8 +322,8 @@ def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(
     import dataclasses
     from types import SimpleNamespace
 
-    from georeg_app.series import track
     from georeg_app.config.measure import MethodConfig
+    from georeg_app.series import frames, reference
 
     seen = []
 
@@ -330,15 +331,16 @@ def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(
         seen.append((path, prefilter_px, order))
         raise ValueError("stop here")
 
-    monkeypatch.setattr(track, "read_image", fake_read_image)
+    monkeypatch.setattr(reference, "read_image", fake_read_image)
+    monkeypatch.setattr(frames, "read_image", fake_read_image)
     method = MethodConfig(prefilter_px=0.7, interpolation_order=5)
     config = SimpleNamespace(method=method, images=SimpleNamespace(cam0="a.png", cam1="b.png"))
     with pytest.raises(ValueError, match="stop here"):
-        track._reference_images(config)
-    reference = track.SeriesReference(displacement=None, solver=None, prefilter_px=0.7, label="ref",
-                                      interpolation_order=5)
-    result = track.measure_frame(reference, 1, ["c.png", "d.png"], None, 0)
+        reference._reference_images(config)
+    ref = reference.SeriesReference(displacement=None, solver=None, prefilter_px=0.7, label="ref",
+                                  interpolation_order=5)
+    result = frames.measure_frame(ref, 1, ["c.png", "d.png"], None, 0)
     assert result.failure and "stop here" in result.failure
     assert seen == [("a.png", 0.7, 5), ("c.png", 0.7, 5)]
-    defaults = {f.name: f.default for f in dataclasses.fields(track.SeriesReference)}
+    defaults = {f.name: f.default for f in dataclasses.fields(reference.SeriesReference)}
     assert defaults["interpolation_order"] == 3

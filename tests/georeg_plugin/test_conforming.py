@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from georeg_plugin.levels.multipatch import NonConformingFacesError, part_mesh, part_space
 from georeg_plugin.spline.conforming import conforming_faces
 from georeg_plugin.spline.geometries import quadrilateral
-from georeg_plugin.levels.multipatch import NonConformingFacesError, part_mesh, part_space
 from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
 from test_multipatch import assert_nested_with_rigid_modes
 

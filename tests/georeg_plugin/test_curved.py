@@ -4,10 +4,10 @@ import pytest
 from numpy.testing import assert_allclose
 
 from georeg_plugin.levels.curved import (is_flat, range_basis, vector_extraction, vector_gluing,
-                                  vector_level)
+                                         vector_level)
+from georeg_plugin.levels.operators import extraction_operator, multilevel_space
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import cylinder, plate_with_hole, rectangle
-from georeg_plugin.levels.operators import extraction_operator, multilevel_space
 from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.spline.refine import refine_uniform
 

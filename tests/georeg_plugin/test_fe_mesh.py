@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from georeg_plugin.spline.fe_mesh import ElementDegreeError, check_element_degree, fe_mesh_from_spline
+from georeg_plugin.spline.fe_mesh import (ElementDegreeError, check_element_degree,
+                                          fe_mesh_from_spline)
 from georeg_plugin.spline.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
 from georeg_plugin.spline.patch import invert_points
 from georeg_plugin.spline.refine import insert_knots, refine_uniform

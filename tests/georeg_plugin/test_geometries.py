@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from georeg_plugin.spline.geometries import cylinder, plate_with_hole, quadrilateral, rectangle, transformed
+from georeg_plugin.spline.geometries import (cylinder, plate_with_hole, quadrilateral, rectangle,
+                                             transformed)
 from georeg_plugin.spline.refine import insert_knots, refine_uniform
 
 L, W, R = 180.0, 50.0, 14.0

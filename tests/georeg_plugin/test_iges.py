@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from georeg_plugin.spline.geometries import rectangle
 from georeg_plugin.io.iges import read_iges_surface_entity, read_iges_surfaces
-from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.io.spline_io import read_iges, write_iges
+from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.spline.patch import SplinePatch
 
 gmsh = pytest.importorskip("gmsh")
 

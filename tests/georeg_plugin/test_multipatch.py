@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from georeg_plugin.levels.multipatch import (NonConformingFacesError, part_component_space,
+                                             part_mesh, part_space)
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import cylinder, quadrilateral
-from georeg_plugin.levels.multipatch import (NonConformingFacesError, part_component_space, part_mesh,
-                                     part_space)
 from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
 
@@ -147,8 +147,8 @@ def test_a_lone_face_may_take_the_scalar_space_and_the_part_stays_nested_and_rig
     scalar space `R_J(xi_I)` (one dof per control point), the glued faces keep the vector
     formulation whatever they are asked: every level holds the part's rigid normal motions
     and is nested in the next finer one (Eq. 13)."""
-    from georeg_plugin.spline.geometries import transformed
     from georeg_plugin.levels.multipatch import isolated_faces
+    from georeg_plugin.spline.geometries import transformed
     panel = transformed(cylinder(100.0, 40.0, 30.0), translation=(0.0, 0.0, 40.0))
     coarse = folded_faces() + [panel]
     assert isolated_faces(coarse).tolist() == [False, False, True]

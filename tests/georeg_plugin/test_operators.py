@@ -9,13 +9,13 @@ from numpy.testing import assert_allclose
 from scipy.interpolate import NdBSpline
 from scipy.spatial import Delaunay
 
+from georeg_plugin.levels.operators import (NodesOutsidePatchError, extraction_operator,
+                                            multilevel_space, node_parameters)
+from georeg_plugin.levels.solver import GeometricRegularization
 from georeg_plugin.spline.fe_mesh import ElementDegreeError, fe_mesh_from_spline
 from georeg_plugin.spline.geometries import cylinder, plate_with_hole, quadrilateral, rectangle
-from georeg_plugin.levels.operators import (NodesOutsidePatchError, extraction_operator,
-                                     multilevel_space, node_parameters)
 from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.spline.refine import insert_knots, refine_uniform
-from georeg_plugin.levels.solver import GeometricRegularization
 
 L, W, R = 100.0, 50.0, 14.0
 Q9_REF = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1],

@@ -7,11 +7,11 @@ from numpy.testing import assert_allclose
 
 from scipy.interpolate import BSpline
 
+from georeg_plugin.levels.operators import MultilevelSpace, multilevel_space
+from georeg_plugin.levels.solver import GeometricRegularization, SingularProjectionError
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import plate_with_hole, rectangle
-from georeg_plugin.levels.operators import MultilevelSpace, multilevel_space
 from georeg_plugin.spline.refine import insert_knots, refine_uniform
-from georeg_plugin.levels.solver import GeometricRegularization, SingularProjectionError
 
 
 def _random_spd(n, rng, density=0.05):

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from georeg_plugin.io.spline_io import (read_iges, read_scalar_field, read_spline_json, write_iges,
+                                        write_spline_json)
 from georeg_plugin.spline.patch import SplinePatch
-from georeg_plugin.io.spline_io import (read_iges, read_scalar_field, read_spline_json,
-                                     write_iges, write_spline_json)
 
 
 def _quarter_cylinder(rational=True, seed=0):
@@ -190,8 +190,8 @@ def test_spline_json_carries_the_std_of_the_control_values(tmp_path):
     """scalar_field_std (the measured control values' standard deviation) is written beside
     scalar_field, one value per control point; a wrong size is refused, naming the field."""
     import json
-    from georeg_plugin.spline.geometries import rectangle
     from georeg_plugin.io.spline_io import write_spline_json
+    from georeg_plugin.spline.geometries import rectangle
     patch = rectangle(60.0, 40.0)
     n = int(np.prod(patch.control_points.shape[:2]))
     path = tmp_path / "s.json"

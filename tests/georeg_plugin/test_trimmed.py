@@ -3,9 +3,9 @@ keep their (u, v), the part mesh of a trimmed face, grid triangles' area."""
 import numpy as np
 import pytest
 
+from georeg_plugin.levels.multipatch import part_mesh
 from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import cylinder, quadrilateral
-from georeg_plugin.levels.multipatch import part_mesh
 from georeg_plugin.spline.refine import refine_uniform
 from georeg_plugin.spline.trimmed import grid_triangles, inside_loops, trim_mesh
 

@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from georeg_app.config.toml_schema import (ConfigError, Table, array, existing_file, load_toml, number,
-                                    one_of, pair, positive, string, strings, table, table_list)
+from georeg_app.config.toml_schema import (ConfigError, Table, array, existing_file, load_toml,
+                                           number, one_of, pair, positive, string, strings, table,
+                                           table_list)
 
 __all__ = ["ConfigError", "Landmark", "Feature", "Specimen", "Plate", "Bar", "Analysis",
            "load_specimen", "load_analysis"]

@@ -34,11 +34,11 @@ import cv2
 import numpy as np
 
 from fesdic_core.atomic import atomic_path
-from fesdic_core.cameras.io.values import (OPENCV_DISTORTION_LENGTHS, as_dist5, as_finite, as_rotation,
-                                 as_size, as_sizes, existing_file, make_camera,
-                                 rotation_from_angles_deg)
-from fesdic_core.cameras.io.vic3d_dice import read_dice, read_vic3d
 from fesdic_core.cameras.camera import Camera
+from fesdic_core.cameras.io.values import (OPENCV_DISTORTION_LENGTHS, as_dist5, as_finite,
+                                           as_rotation, as_size, as_sizes, existing_file,
+                                           make_camera, rotation_from_angles_deg)
+from fesdic_core.cameras.io.vic3d_dice import read_dice, read_vic3d
 from fesdic_core.cameras.rig import CalibrationError, place_camera1, stereo_transform
 
 logger = logging.getLogger(__name__)

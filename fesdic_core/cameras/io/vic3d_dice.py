@@ -45,9 +45,9 @@ import zipfile
 
 import numpy as np
 
-from fesdic_core.cameras.io.values import (as_finite, as_rotation, as_size, as_sizes, existing_file,
-                                 make_camera, rotation_from_angles_deg)
 from fesdic_core.cameras.camera import Camera
+from fesdic_core.cameras.io.values import (as_finite, as_rotation, as_size, as_sizes, existing_file,
+                                           make_camera, rotation_from_angles_deg)
 from fesdic_core.cameras.rig import CalibrationError, place_camera1
 
 logger = logging.getLogger(__name__)

@@ -1,0 +1,145 @@
+"""The reference of a series: its surface, cameras and images, built once for every frame.
+
+The reference is frame 0: the measured surface and calibrated cameras of the reference pair
+(``[images]``), either measured here first (as ``georeg measure`` does) or read from a
+``georeg measure`` output folder (``[reference]``). The reference state (images,
+quadratures, cameras, operators) is built once (:class:`SeriesReference`) and, with Dask
+(:mod:`georeg_app.series.dask`), shipped once to every worker.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from adapters.fesdic_core import NominalModel, displacement_space
+from fesdic_core.cameras.rig import read_cameras_json
+from fesdic_core.displacement.driver import (DisplacementReference, DisplacementSettings,
+                                             displacement_reference)
+from fesdic_core.displacement.solvers import ComponentTikhonovSolver
+from fesdic_core.fe.mesh import SurfaceMesh
+from fesdic_core.fe.mesh_io import read_mesh
+from fesdic_core.imaging.image import Image, read_image
+from fesdic_core.solve.solvers import CachedFactorization, DirectSolver
+from georeg_plugin.io.spline_io import read_spline_json
+from georeg_plugin.levels.solver import GeometricRegularization
+
+from georeg_app.config.measure import Config, OutputConfig
+from georeg_app.config.track import TrackConfig
+from georeg_app.inputs.nominal import build_model
+from georeg_app.shape.methods import measure_specs
+from georeg_app.shape.pipeline import run_methods
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["SeriesReference", "load_reference", "displacement_solver", "check_frames",
+           "series_reference"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class SeriesReference:
+    """Everything a frame needs, built once: the displacement reference (surface, cameras,
+    reference pyramids and quadratures, with ``jacobian = "reference"`` the reference
+    Jacobian and H of each scale) and the step solver's prototype (copied per frame: a
+    Tikhonov solver keeps per-scale state; a :class:`CachedFactorization`, the modified
+    Gauss-Newton's, is shared: its factors of the reference's H serve every frame)."""
+
+    displacement: DisplacementReference
+    solver: object | None
+    prefilter_px: float
+    label: str
+    interpolation_order: int = 3
+    element_face: np.ndarray | None = None       # a CAD part's face of each element
+
+
+def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
+    prefilter, order = config.method.prefilter_px, config.method.interpolation_order
+    return tuple(read_image(p, prefilter_px=prefilter, order=order) for p in (config.images.cam0,
+                                                                               config.images.cam1))
+
+
+def load_reference(config: TrackConfig, progress: bool = False
+                   ) -> tuple[SurfaceMesh, tuple, tuple, NominalModel | None, str]:
+    """The reference surface, calibrated cameras, reference images, the spline model (for
+    the georeg displacement) and a label saying where they come from."""
+    images = _reference_images(config)
+    if config.reference is not None:
+        ref = config.reference
+        mesh = read_mesh(ref.mesh)
+        cameras = tuple(read_cameras_json(ref.cameras))
+        model = None
+        if ref.spline is not None:
+            if "faces" in json.loads(Path(ref.spline).read_text()):
+                raise ValueError(f"{ref.spline}: the reference is a part of several faces, which "
+                                 "a [reference] folder does not rebuild (its nodes' face "
+                                 "parameters are not saved); give the part's [geometry] "
+                                 '(kind = "cad") and its [cameras] instead, without [reference], '
+                                 "to measure the reference shape in the run")
+            model = NominalModel(patch=read_spline_json(ref.spline), mesh=mesh, uv=None)
+        return mesh, cameras, images, model, f"{ref.dir} ({ref.label})"
+    shape_config = Config(images=config.images, cameras=config.cameras, geometry=config.geometry,
+                          method=config.method, output=OutputConfig(config.output.dir),
+                          source=config.source)
+    specs = measure_specs(shape_config)[:1]
+    logger.info("reference shape: %s on the reference pair", specs[0].label)
+    run = run_methods(shape_config, specs, images=images, progress=progress)
+    result = run.results[0]
+    if not result.ok:
+        raise RuntimeError(f"the shape measurement of the reference pair failed "
+                           f"({result.spec.label}): {result.failure}")
+    m = result.measurement
+    mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
+    nominal = build_model(config.geometry, config.method.fixed_levels)
+    model = dataclasses.replace(nominal, mesh=mesh)        # a part keeps its faces
+    return mesh, tuple(m.cameras), images, model, f"measured here ({result.spec.label})"
+
+
+def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | None = None,
+                        tikhonov_length_mm: float = 10.0, levels: int = 2):
+    """The step solver of a displacement method on the node-major dofs: None (plain FE),
+    Tikhonov on each component, or the spline levels of ``model`` on each component
+    (``kron(C_s, I3)``, image scale s -> level min(s, levels - 1))."""
+    if method == "fe":
+        return None
+    if method == "tikhonov":
+        return ComponentTikhonovSolver(mesh, tikhonov_length_mm)
+    if method != "georeg":
+        raise ValueError(f"unknown displacement method {method!r}")
+    if model is None:
+        raise ValueError("[displacement] method = \"georeg\" needs the spline of the reference")
+    return GeometricRegularization(displacement_space(model, levels))
+
+
+def check_frames(config: TrackConfig, size: tuple[int, int]) -> None:
+    """Refuse, before any computing, a frame that cannot be read or whose size (h, w)
+    differs from the reference pair's (the error names the file)."""
+    for k, (p0, p1) in enumerate(zip(config.series.cam0, config.series.cam1), start=1):
+        for path in (p0, p1):
+            a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if a is None:
+                raise ValueError(f"frame {k}: cannot read image file {path} (not an image "
+                                 "OpenCV can decode)")
+            if tuple(a.shape[:2]) != tuple(size):
+                raise ValueError(f"frame {k}: {path} is {a.shape[1]} x {a.shape[0]} px but the "
+                                 f"reference images are {size[1]} x {size[0]} px")
+
+
+def series_reference(config: TrackConfig, progress: bool = False) -> SeriesReference:
+    """Load or measure the reference and build the displacement reference and solver."""
+    mesh, cameras, images, model, label = load_reference(config, progress)
+    d = config.displacement
+    settings = DisplacementSettings(scales=d.scale_sequence,
+                                    normalisation=config.method.normalisation,
+                                    jacobian=d.jacobian)
+    reference = displacement_reference(mesh, images, cameras, settings)
+    solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
+    if d.jacobian == "reference":      # H of each scale factorized once for the whole series
+        solver = CachedFactorization(DirectSolver() if solver is None else solver)
+    return SeriesReference(displacement=reference, solver=solver,
+                           prefilter_px=config.method.prefilter_px, label=label,
+                           interpolation_order=config.method.interpolation_order,
+                           element_face=None if model is None else model.element_face)
