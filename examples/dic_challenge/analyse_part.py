@@ -1,4 +1,5 @@
 """The challenge's figures from the specimen measured as one part, compared with the laser and pyvale.
+===================================================================================================
 
     georeg measure examples/dic_challenge/specimen_part.toml --out OUT_DIR
     python examples/dic_challenge/analyse_part.py OUT_DIR [--out REPORT_DIR]

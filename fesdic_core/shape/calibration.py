@@ -170,6 +170,8 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
     start : the residual at ``cameras`` when the caller has it (same points, images, mask
         and normalisation, with ``dr_dX`` when the stereo relation is kept, else ``dr_dp``).
 
+    Notes
+    -----
     A Gauss-Newton step below the stagnation thresholds, or whose predicted fall of the cost
     is below one unit of chi-square (the data cannot tell p from p + dp, as for the shape,
     :func:`fesdic_core.shape.operators.predicted_chi_square_change`), is not taken (nor its residual
