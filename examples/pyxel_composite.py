@@ -19,9 +19,10 @@ the figures and fields are written there, all or nothing: ``summary.json``,
 ``fields.csv`` and ``fields.vtu`` (nodal displacements in px, mesh in mm),
 ``displacement.png`` and ``residual.png``.
 
-Needs the optional extra:  python -m pip install -e ".[pyxel]"
-Run:  python examples/pyxel_composite.py [--out pyxel_composite_out]
-      [--levels 4 --scales 3,2,1,0 --elements 3,1]
+Needs the optional extra: ``python -m pip install -e ".[pyxel]"``. Run::
+
+    python examples/pyxel_composite.py [--out pyxel_composite_out]
+        [--levels 4 --scales 3,2,1,0 --elements 3,1]
 """
 from __future__ import annotations
 

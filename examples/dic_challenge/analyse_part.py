@@ -1,6 +1,8 @@
 """The challenge's figures from the specimen measured as one part, compared with the laser and pyvale.
 ===================================================================================================
 
+Usage::
+
     georeg measure examples/dic_challenge/specimen_part.toml --out OUT_DIR
     python examples/dic_challenge/analyse_part.py OUT_DIR [--out REPORT_DIR]
         [--config specimen_part.toml] [--analysis analysis.toml]

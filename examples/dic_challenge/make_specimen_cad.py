@@ -11,15 +11,15 @@ both half-cylinders, both wedge prisms), with the block's height taken from the 
 ``analysis.toml`` (6.36 mm, the laser's). The file holds one open shell of the union's
 faces that the cameras can see, each named (STEP ``ADVANCED_FACE`` names through XCAF):
 
-========================  ========================================================
-``base``                  the plate's top face, the five footprints trimmed out (inner wires)
-``block_top``             the block's top face
-``block_wall_xm`` ...     the block's four walls, by outward normal: ``xm`` (-x), ``xp``, ``ym``, ``yp``
-``cylinder_h``, ``_v``    the half-cylinders' crests, +-40 degrees about the top (axes below the plate)
-``prism_h_ym``, ``_yp``   the horizontal prism's slanted faces, by outward normal (-y, +y)
-``prism_v_xm``, ``_xp``   the vertical prism's slanted faces, by outward normal (-x, +x)
-``cylinder_h_flank_a`` .. the bars' flanks, from the crest face down to the plate (a, b)
-========================  ========================================================
+==========================  ========================================================
+``base``                    the plate's top face, the five footprints trimmed out (inner wires)
+``block_top``               the block's top face
+``block_wall_xm`` ...       the block's four walls, by outward normal: ``xm`` (-x), ``xp``, ``ym``, ``yp``
+``cylinder_h``, ``_v``      the half-cylinders' crests, +-40 degrees about the top (axes below the plate)
+``prism_h_ym``, ``_yp``     the horizontal prism's slanted faces, by outward normal (-y, +y)
+``prism_v_xm``, ``_xp``     the vertical prism's slanted faces, by outward normal (-x, +x)
+``cylinder_h_flank_a`` ..   the bars' flanks, from the crest face down to the plate (a, b)
+==========================  ========================================================
 
 in this order (16 faces). The bars' end caps and the plate's sides and bottom are left out.
 The faces share their edges (they come from one solid), so a reader can weld them. The file
