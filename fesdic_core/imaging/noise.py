@@ -3,7 +3,7 @@
 At the true shape and poses the residual is not zero: each camera adds its sensor noise,
 and the interpolant misses the finest texture (sub-pixel speckle detail), differently in
 the two views. Both are estimated from each image alone with Immerkaer's operator
-(J. Immerkaer, "Fast noise variance estimation", CVIU 64(2), 1996):
+(J. Immerkaer, "Fast noise variance estimation", CVIU 64(2), 1996)::
 
     N = [[1, -2, 1], [-2, 4, -2], [1, -2, 1]],     sigma = sqrt(pi / 2) * mean |N * f| / 6,
 

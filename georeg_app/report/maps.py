@@ -194,7 +194,7 @@ def residual_maps(run, cells_along_length: int = 300, cmap: str = "RdBu_r") -> b
     """Gray-level residual at the integration points in % of the dynamic range (Fig. 12),
     averaged over cells of the specimen's best-fit plane (at most ``cells_along_length``
     along its length, about 2 points per cell), one panel per method; the colour scale is
-    the median over the successful methods of the 99th percentile of |r| (a poor method
+    the median over the successful methods of the 99th percentile of ``|r|`` (a poor method
     saturates: arrows of the colour bar). None if no method has a measurement."""
     results = run.results
     if not measured(results):

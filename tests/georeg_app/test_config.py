@@ -208,7 +208,7 @@ def _documented_example(text: str) -> str:
 
 def _readme_example() -> str:
     readme = (ROOT / "README.md").read_text()
-    section = readme.split("## Configuration (TOML)", 1)[1]
+    section = readme.split("## Quickstart", 1)[1]     # the configuration of README's quickstart
     return re.search(r"```toml\n(.*?)```", section, re.S).group(1)
 
 
