@@ -1,5 +1,4 @@
 """pyxel-dic with and without the geometric-regularization plugin, on real images.
-===============================================================================
 
 The open-hole composite pair and the Abaqus Q4 mesh of pyxel's example 1 (see
 data/pyxel_composite/README.md). The mesh is a "legacy" mesh, not made from any

@@ -1,5 +1,4 @@
 """Tutorial: the operator projection of geometric regularization, on the smallest example.
-=======================================================================================
 
 Colantonio et al. (IJNME 2020, sections 2-3) regularize FE stereo-DIC shape measurement
 without touching the FE-DIC code. The FE code assembles, at each Gauss-Newton step, the

@@ -125,3 +125,18 @@ def test_the_toml_reference_has_every_key_and_default(georeg_docs) -> None:
             assert f"``{field.name}``" in page, field.name
     default = MethodConfig().max_fixed_point
     assert f"``max_fixed_point``\n     - ``int``\n     - ``{default}``" in page
+
+
+def test_a_gallery_page_without_a_title_gets_its_first_line_as_title(georeg_docs) -> None:
+    page = ".. _sphx_glr_auto_examples_x.py:\n\n\nSummary line of x.\n\nMore text.\n"
+    titled = georeg_docs.titled_example(page).split("\n")
+    assert titled[3:6] == ["Summary line of x.", "=" * len("Summary line of x."), ""]
+    already = ".. _sphx_glr_auto_examples_x.py:\n\nTitle\n=====\n\nText.\n"
+    assert georeg_docs.titled_example(already) == already
+
+
+def test_the_docs_build_is_in_ci_after_the_test_command() -> None:
+    lines = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    test_line = lines.index(TEST_COMMAND)
+    docs = [i for i, line in enumerate(lines) if "sphinx" in line and "-W" in line]
+    assert docs and docs[0] > test_line

@@ -310,6 +310,29 @@ def generate(docs_dir: Path) -> None:
     _write(out / "config_reference.rst", config_page())
 
 
+def titled_example(text: str) -> str:
+    """A sphinx-gallery page whose example docstring has no reST title: its first line
+    underlined (the examples' docstrings open with a one-line summary, used by ``--help``)."""
+    lines = text.split("\n")
+    for i, line in enumerate(lines):
+        if line.startswith(".. _sphx_glr_") and line.endswith(".py:"):
+            j = i + 1
+            while j < len(lines) and not lines[j].strip():
+                j += 1
+            if j + 1 < len(lines) and lines[j].strip() and not (
+                    lines[j + 1].strip() and set(lines[j + 1].strip()) <= set("=-~^*#")):
+                lines.insert(j + 1, "=" * len(lines[j]))
+                lines.insert(j + 2, "")
+            break
+    return "\n".join(lines)
+
+
+def _source_read(app, docname: str, source: list[str]) -> None:  # noqa: ANN001
+    if docname.startswith("auto_examples/"):
+        source[0] = titled_example(source[0])
+
+
 def setup(app):  # noqa: ANN001, ANN201 (Sphinx's extension entry point)
     app.connect("builder-inited", lambda app: generate(Path(app.srcdir)))
+    app.connect("source-read", _source_read)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -1,5 +1,4 @@
 """The challenge's figures from the specimen measured as one part, compared with the laser and pyvale.
-===================================================================================================
 
 Usage::
 

@@ -1,5 +1,4 @@
 """Build the CAD of the Stereo DIC Challenge specimen's visible faces (STEP, named faces).
-=======================================================================================
 
     python examples/dic_challenge/make_specimen_cad.py [--out data/dic_challenge_stereo/specimen.step]
         [--interim-iges interim.igs]

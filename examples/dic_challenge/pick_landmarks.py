@@ -1,5 +1,4 @@
 """Pick the landmarks and the nominal geometry of the Stereo DIC Challenge specimen, once.
-=======================================================================================
 
 This is the one-time preparation of ``specimen.toml``, ``analysis.toml`` and the landmarks
 of ``specimen_part.toml``; nothing else calls it. It prints TOML snippets; the values stored

@@ -1,5 +1,4 @@
 """Does the method bias the radius of a bar? Synthetic images of the vertical bar, measured.
-=========================================================================================
 
 The real rig (pyvale's calibration posed by the landmarks of ``specimen.toml``) looks at a
 rendered half-cylinder along the vertical bar's axis, speckle of about 7 px, noise of 1.5
