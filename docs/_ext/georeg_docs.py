@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
+import importlib.util
 import inspect
 import pkgutil
 import textwrap
@@ -37,10 +38,9 @@ def public_modules(packages: tuple[str, ...] = PACKAGES) -> list[str]:
     """Every importable module of ``packages`` (those that exist), parents first."""
     names: list[str] = []
     for package in packages:
-        try:
-            root = importlib.import_module(package)
-        except ImportError:
+        if importlib.util.find_spec(package) is None:     # e.g. ``georeg`` before it exists
             continue
+        root = importlib.import_module(package)
         names.append(package)
         if hasattr(root, "__path__"):
             for info in pkgutil.walk_packages(root.__path__, package + "."):
