@@ -123,6 +123,13 @@ def test_the_toml_reference_has_every_key_and_default(georeg_docs) -> None:
     for cls in (MethodConfig, DisplacementConfig):
         for field in dataclasses.fields(cls):
             assert f"``{field.name}``" in page, field.name
+    from georeg_app.config import measure, track
+    for module, classes in ((measure, (measure.GeometryConfig, MethodConfig)),
+                            (track, (DisplacementConfig,))):
+        example = module.__doc__.split("::\n", 1)[1]         # the docstring's complete example
+        for cls in classes:
+            for field in dataclasses.fields(cls):
+                assert re.search(rf"^\s*#? ?{field.name} = ", example, re.MULTILINE), field.name
     default = MethodConfig().max_fixed_point
     assert f"``max_fixed_point``\n     - ``int``\n     - ``{default}``" in page
 

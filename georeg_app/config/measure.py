@@ -41,7 +41,7 @@ A complete example (every key; optional keys show their default in parentheses):
     [method]                      # optional section
     name = "georeg"               # "fe" | "tikhonov" | "georeg"       (default "georeg")
     levels = "auto"               # georeg spline levels: "auto" (chosen from the data by an
-                                  # information criterion, README "Level choice") or an integer
+                                  # information criterion, docs "Level choice") or an integer
                                   # (the paper's fixed levels)          (default "auto")
     start_levels = 3              # levels of the coarse-to-fine start of "auto" (default 3)
     scales = 3                    # image scales, coarse to fine       (default 3)
