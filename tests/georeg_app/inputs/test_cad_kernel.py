@@ -19,7 +19,7 @@ from georeg_plugin.spline.geometries import cylinder                    # noqa: 
 from georeg_plugin.io.iges import read_iges_surfaces                # noqa: E402
 from georeg_plugin.io.spline_io import write_iges                   # noqa: E402
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "cad"
+DATA = Path(__file__).resolve().parents[2] / "data" / "cad"
 PLATE_AREA = 60.0 * 40.0 - np.pi * 8.0 ** 2
 
 

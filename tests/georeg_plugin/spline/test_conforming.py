@@ -9,7 +9,7 @@ from georeg_plugin.levels.multipatch import NonConformingFacesError, part_mesh, 
 from georeg_plugin.spline.conforming import conforming_faces
 from georeg_plugin.spline.geometries import quadrilateral
 from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
-from test_multipatch import assert_nested_with_rigid_modes
+from level_checks import assert_nested_with_rigid_modes
 
 #: a long face A (x 0..40 along the fold y = 0) meeting two faces B (x 0..25) and C (25..40)
 A = quadrilateral([[0, 0, 0], [40, 0, 0], [40, 20, 4], [0, 20, 4]])
