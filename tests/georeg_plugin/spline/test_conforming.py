@@ -42,6 +42,7 @@ def test_knot_spans_that_differ_along_an_edge_are_unified():
     assert np.count_nonzero(crease) == 2 * (union.size - 1) + 1       # one node each, welded
 
 
+@pytest.mark.slow
 def test_an_edge_that_meets_two_faces_is_split_where_they_meet():
     """A's edge meets B and C: A gets a C0 knot (multiplicity p = 2) at x = 25; the levels built
     on the conforming faces are nested, glued (the correction continuous across both edges)
