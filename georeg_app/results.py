@@ -61,6 +61,11 @@ def check_output_folder(out: str | os.PathLike, overwrite: bool) -> None:
                               "use --overwrite to replace its contents")
 
 
+def _trusted(result) -> bool:
+    """A method's verdict, from its ``status`` ("ok" or "failed"), as summary.json says it."""
+    return getattr(result, "status", "ok") == "ok"
+
+
 def _read_vtu(write) -> "meshio.Mesh":  # noqa: F821 (meshio imported here, lazily)
     """The mesh a VTU writer ``write(path)`` writes, read back with meshio."""
     import meshio
@@ -125,7 +130,7 @@ class ShapeRun:
     @property
     def ok(self) -> bool:
         """The chosen method's measurement is trusted (passed its checks)."""
-        return self.result().ok
+        return _trusted(self.result())
 
     @property
     def failure(self) -> str | None:
@@ -135,7 +140,7 @@ class ShapeRun:
     @property
     def failed(self) -> tuple[str, ...]:
         """The labels of every method that failed."""
-        return tuple(r.spec.label for r in self.run.results if not r.ok)
+        return tuple(r.spec.label for r in self.run.results if not _trusted(r))
 
     def _measurement(self):
         r = self.result()
@@ -167,7 +172,7 @@ class ShapeRun:
     def check(self) -> None:
         """Raise :class:`MeasurementFailed` if the command line would not deliver this run
         (``measure``: a method failed; ``compare``, ``demo``: every method failed)."""
-        failed = [r for r in self.run.results if not r.ok]
+        failed = [r for r in self.run.results if not _trusted(r)]
         if failed and (self.command == "measure" or len(failed) == len(self.run.results)):
             raise MeasurementFailed("; ".join(f"{r.spec.label} failed: {r.failure}" for r in failed))
 
