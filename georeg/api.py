@@ -114,7 +114,7 @@ def _shape_run(command: str, images, cameras, nominal, *, options: dict, landmar
     progress = _progress(progress)
     config, loaded = _config(command, images, cameras, nominal, options, landmarks, source, out)
     if out is not None:
-        check_output_folder(out, overwrite)                          # before computing
+        check_output_folder(out, overwrite, option="overwrite=True")   # before computing
     specs = measure_specs(config) if command == "measure" else default_specs(config)
     logger.info("%s: %d method(s): %s", command, len(specs), ", ".join(s.label for s in specs))
     result = ShapeRun(run_methods(config, specs, images=loaded, truth=truth, progress=progress),
@@ -266,7 +266,7 @@ def track(images, cameras=None, nominal=None, *, series=None, displacement: str 
     config = _track_config(images, cameras, nominal, series, displacement, reference, options,
                            landmarks, source, out)
     if out is not None:
-        check_output_folder(out, overwrite)                          # before computing
+        check_output_folder(out, overwrite, option="overwrite=True")   # before computing
     result = SeriesRun(run_track(config, scheduler, progress, workers=workers))
     if out is not None:
         result.save(out, overwrite=overwrite)

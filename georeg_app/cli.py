@@ -37,6 +37,9 @@ from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["main", "build_parser", "progress_enabled", "check_output_folder", "check_scheduler",
+           "MeasurementFailed", "SCHEDULERS"]
+
 PROG = "georeg"
 DEFAULT_DEMO_OUT = "demo_out"
 EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130

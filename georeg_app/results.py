@@ -16,6 +16,7 @@ import os
 import tempfile
 from pathlib import Path
 
+import meshio
 import numpy as np
 
 from georeg_app.series.outputs import frame_file, track_summary, write_frame_vtu, write_track
@@ -36,8 +37,10 @@ class MeasurementFailed(RuntimeError):
     """The run finished but its measurement(s) cannot be trusted (the message says why)."""
 
 
-def check_output_folder(out: str | os.PathLike, overwrite: bool) -> None:
-    """Refuse, before any computing, an output folder that cannot or must not be written.
+def check_output_folder(out: str | os.PathLike, overwrite: bool,
+                        option: str = "--overwrite") -> None:
+    """Refuse, before any computing, an output folder that cannot or must not be written
+    (``option``: how the message names the way to replace a folder's contents).
 
     Raises
     ------
@@ -58,7 +61,7 @@ def check_output_folder(out: str | os.PathLike, overwrite: bool) -> None:
         raise PermissionError(f"output folder {out}: {parent} is not writable")
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise FileExistsError(f"output folder {out} is not empty; choose another folder or "
-                              "use --overwrite to replace its contents")
+                              f"use {option} to replace its contents")
 
 
 def _trusted(result) -> bool:
@@ -66,9 +69,8 @@ def _trusted(result) -> bool:
     return getattr(result, "status", "ok") == "ok"
 
 
-def _read_vtu(write) -> "meshio.Mesh":  # noqa: F821 (meshio imported here, lazily)
+def _read_vtu(write) -> meshio.Mesh:
     """The mesh a VTU writer ``write(path)`` writes, read back with meshio."""
-    import meshio
     with tempfile.TemporaryDirectory(prefix="georeg_vtu_") as folder:
         path = Path(folder) / "surface.vtu"
         write(path)
@@ -190,10 +192,10 @@ class ShapeRun:
             For an output folder that must not or cannot be written.
         """
         self.check()
-        check_output_folder(folder, overwrite)
+        check_output_folder(folder, overwrite, option="overwrite=True")
         return write_all(folder, self.run, overwrite=overwrite)
 
-    def to_meshio(self, method: str | None = None) -> "meshio.Mesh":  # noqa: F821
+    def to_meshio(self, method: str | None = None) -> meshio.Mesh:
         """The measured surface of ``method`` (default: the chosen one) as a ``meshio.Mesh``
         with the point and cell data of its VTU (:func:`~georeg_app.shape.outputs.write_method_vtu`)."""
         result = self.result(method)
@@ -252,10 +254,10 @@ class SeriesRun:
         """Write ``georeg track``'s output files into ``folder`` (all or nothing; see
         :meth:`ShapeRun.save`)."""
         self.check()
-        check_output_folder(folder, overwrite)
+        check_output_folder(folder, overwrite, option="overwrite=True")
         return write_track(folder, self.run, overwrite=overwrite)
 
-    def to_meshio(self, frame: int) -> "meshio.Mesh":  # noqa: F821
+    def to_meshio(self, frame: int) -> meshio.Mesh:
         """Frame ``frame``'s field on the reference surface as a ``meshio.Mesh``, with the
         point data of its VTU (``displacement_mm``, ``residual``, ``strain_*``)."""
         f = self.frame(frame)

@@ -96,7 +96,7 @@ def test_save_writes_the_files_of_georeg_measure(api_run, cli_out, tmp_path):
 
 def test_save_refuses_a_non_empty_folder_unless_overwrite(api_run, tmp_path):
     (tmp_path / "old.txt").write_text("x")
-    with pytest.raises(FileExistsError, match="not empty"):
+    with pytest.raises(FileExistsError, match="not empty.*overwrite=True"):
         api_run.save(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.txt"]
     api_run.save(tmp_path, overwrite=True)

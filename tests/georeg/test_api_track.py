@@ -1,6 +1,7 @@
 """georeg.track on Python values: the files of `georeg track`, each frame as meshio, the
 progress callback. A small rendered series (the plate of tests/georeg_app/test_track.py,
-320 x 240 px, two translations) and a reference folder made from the exact cameras."""
+320 x 240 px, two translations, 2 x 2 rays a pixel) and a reference folder made from the
+exact cameras."""
 import json
 
 import cv2
@@ -30,10 +31,10 @@ def series(tmp_path_factory):
         for k, a in enumerate(arrays):
             cv2.imwrite(str(folder / f"{stem}_cam{k}.png"), a.astype(np.uint8))
 
-    save(render_stereo(plate, cameras, noise_std=2.0, seed=1, progress=False), "ref")
+    save(render_stereo(plate, cameras, supersample=2, noise_std=2.0, seed=1, progress=False), "ref")
     for i, motion in enumerate(MOTIONS, start=1):
-        save(render_stereo(plate, cameras, noise_std=2.0, seed=10 + i, progress=False,
-                           motion=motion), f"f{i}")
+        save(render_stereo(plate, cameras, supersample=2, noise_std=2.0, seed=10 + i,
+                           progress=False, motion=motion), f"f{i}")
     ref = folder / "shape_out"
     ref.mkdir()
     write_mesh(ref / "fe.vtu", rectangle_mesh(44.0, 30.0, 4, 3, family="Q4"))

@@ -109,5 +109,5 @@ def test_measure_with_toml_and_out_checks_the_folder_before_computing(tmp_path, 
                                        'length_mm = 40.0\nwidth_mm = 30.0\n')
     monkeypatch.setattr(api, "run_methods", lambda *a, **k: pytest.fail("computing started"))
     assert api.load_config(tmp_path / "run.toml") == load_config(tmp_path / "run.toml")
-    with pytest.raises(FileExistsError, match="not empty"):
+    with pytest.raises(FileExistsError, match="not empty.*overwrite=True"):
         api.measure(tmp_path / "run.toml", out=tmp_path / "out")
