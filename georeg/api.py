@@ -136,7 +136,7 @@ def measure(images, cameras=None, nominal=None, *, method: str = "georeg",
     ----------
     images : two image files, two 2-D arrays (h, w) of gray levels, or two core
         ``Image``s; or a TOML configuration file (``"run.toml"``) or a ``Config``, then
-        without ``cameras`` and ``nominal``.
+        without ``cameras``, ``nominal`` and method options (its ``[method]`` holds them).
     cameras : a calibration file (the project's JSON, OpenCV FileStorage, VIC-3D, DICe,
         pyvale CSV; recognised from the file, or named by ``source``), or two core Cameras.
     nominal : a dict like the TOML ``[geometry]`` table (``{"kind": "plate_with_hole",
