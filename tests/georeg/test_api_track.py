@@ -18,6 +18,8 @@ from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm
 from fesdic_core.synthetic.specimen import flat_plate
 from georeg_app import cli
 
+pytestmark = pytest.mark.slow         # a series measured end to end
+
 MOTIONS = (RigidMotion((0.1, -0.05, 0.05)), RigidMotion((0.2, -0.1, 0.1)))
 
 

@@ -39,6 +39,7 @@ def test_readme_quickstart_block_is_the_file_s_code():
     assert _code_lines(match.group(1)) == _code_lines(QUICKSTART.read_text())
 
 
+@pytest.mark.slow                       # the demo rendered and measured end to end
 def test_quickstart_measures_the_demo_and_saves_what_the_command_line_writes(tmp_path, monkeypatch):
     """At half the demo's image size (612 x 408 px, about 13 s instead of 40 s): the measurement
     is trusted and its RMS error to the true surface after the best rigid alignment is below

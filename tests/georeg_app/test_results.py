@@ -1,14 +1,9 @@
-"""ShapeRun / SeriesRun: the command line's verdicts (what it delivers and what it refuses),
+"""georeg_app.results.ShapeRun: the command line's verdicts (what it delivers and what it refuses),
 on stand-in runs (no measurement computed here)."""
-import sys
-from pathlib import Path
-
 import pytest
 
 from georeg_app.results import MeasurementFailed, ShapeRun
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "georeg_app"))
-from georeg_app_fakes import fake_run  # noqa: E402
+from georeg_app_fakes import fake_run
 
 
 def test_the_chosen_method_is_the_first_of_measure_and_the_first_georeg_of_compare():
