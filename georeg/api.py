@@ -6,11 +6,15 @@ Each function builds the objects the command line builds (``Config``/``TrackConf
 readers before any computing (:mod:`georeg.inputs`), and the result saves the files the
 command line writes (:class:`~georeg_app.results.ShapeRun`, :class:`~georeg_app.results.SeriesRun`).
 
->>> import georeg                                                   # doctest: +SKIP
->>> images, cameras, nominal, truth = georeg.demo()
->>> run = georeg.measure(images, cameras, nominal, levels=3)
->>> run.ok, run.residual_percent
->>> run.save("out")
+Examples
+--------
+The demo's pair measured with three spline levels (about 40 s: not run as a doctest)::
+
+    import georeg
+    images, cameras, nominal, truth = georeg.demo()
+    run = georeg.measure(images, cameras, nominal, levels=3)
+    run.ok, run.residual_percent
+    run.save("out")
 """
 from __future__ import annotations
 
