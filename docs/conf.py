@@ -120,5 +120,33 @@ def _definition_lists(app, what, name, obj, options, lines):  # noqa: ANN001
     lines[:] = out
 
 
+# In the numpydoc sections the docstrings often write ``name : what it is`` in prose, where
+# numpydoc expects ``name : type``. Before napoleon reads them, such prose (more than four
+# words, or a sentence) moves to the description, so it is not cut into a "type".
+_SECTIONS = {"Parameters", "Other Parameters", "Returns", "Yields", "Raises", "Attributes",
+             "Warns", "Receives"}
+_FIELD = re.compile(r"^(\s*)([^\s:][^:]*?) : (\S.*)$")
+
+
+def _prose_fields(app, what, name, obj, options, lines):  # noqa: ANN001
+    out: list[str] = []
+    section_indent = None
+    for i, line in enumerate(lines):
+        following = lines[i + 1] if i + 1 < len(lines) else ""
+        if line.strip() in _SECTIONS and following.strip() and set(following.strip()) == {"-"}:
+            section_indent = len(line) - len(line.lstrip())
+            out.append(line)
+            continue
+        match = _FIELD.match(line) if section_indent is not None else None
+        if match and len(match.group(1)) == section_indent:
+            indent, field, text = match.groups()
+            if len(text.split()) > 4 or text.rstrip().endswith("."):
+                out += [f"{indent}{field}", f"{indent}    {text}"]
+                continue
+        out.append(line)
+    lines[:] = out
+
+
 def setup(app):  # noqa: ANN001, ANN201
+    app.connect("autodoc-process-docstring", _prose_fields, priority=400)
     app.connect("autodoc-process-docstring", _definition_lists, priority=600)

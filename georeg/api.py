@@ -139,7 +139,7 @@ def measure(images, cameras=None, nominal=None, *, method: str = "georeg",
     Parameters
     ----------
     images : two image files, two 2-D arrays (h, w) of gray levels, or two core
-        ``Image``s; or a TOML configuration file (``"run.toml"``) or a ``Config``, then
+        ``Image`` objects; or a TOML configuration file (``"run.toml"``) or a ``Config``, then
         without ``cameras``, ``nominal`` and method options (its ``[method]`` holds them).
     cameras : a calibration file (the project's JSON, OpenCV FileStorage, VIC-3D, DICe,
         pyvale CSV; recognised from the file, or named by ``source``), or two core Cameras.

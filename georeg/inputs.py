@@ -72,7 +72,7 @@ def _short(value: Any) -> str:
 
 def images_config(images: Any, method: MethodConfig, base: Path
                   ) -> tuple[ImagesConfig, tuple[Image, Image] | None]:
-    """``images``, two paths or two 2-D arrays or two core ``Image``s, as the run's
+    """``images``, two paths or two 2-D arrays or two core ``Image`` objects, as the run's
     ``[images]`` and, for arrays and Images, the loaded pair (else None: read by the run)."""
     pair = _pair(images, "images", "images")
     if all(_is_path(p) for p in pair):

@@ -102,7 +102,7 @@ def module_page(module_name: str, modules: list[str]) -> str:
         obj = getattr(module, name)
         home = _home(name, obj, module_name, modules)
         if isinstance(obj, types.ModuleType):
-            submodules.append(obj.__name__)
+            submodules.append((name, obj))
         elif home == module_name:
             own.append(name)
         else:
@@ -110,8 +110,8 @@ def module_page(module_name: str, modules: list[str]) -> str:
     lines = [_title(f"``{module_name}``"), f".. automodule:: {module_name}", "   :no-members:", ""]
     if submodules:
         lines += [_title("Subpackages and modules", "-"),
-                  *_link_table([(f":mod:`{sub}`", importlib.import_module(sub))
-                                for sub in submodules])]
+                  *_link_table([(f":mod:`{name} <{sub.__name__}>`", sub)
+                                for name, sub in submodules])]
     if linked:
         lines += [_title("Exported names", "-"),
                   "Defined in the modules linked; exported here too.", "",
