@@ -332,7 +332,45 @@ def _source_read(app, docname: str, source: list[str]) -> None:  # noqa: ANN001
         source[0] = titled_example(source[0])
 
 
+def _resolve(target: str) -> object | None:
+    """The object a dotted name points to (``a.b.Name.method``), or None."""
+    parts = target.split(".")
+    for cut in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:cut]))
+        except ImportError:
+            continue
+        try:
+            for attr in parts[cut:]:
+                obj = getattr(obj, attr)
+        except AttributeError:
+            return None
+        return obj
+    return None
+
+
+def _missing_reference(app, env, node, contnode):  # noqa: ANN001, ANN201
+    """A name re-exported by a package (``fesdic_core.solve.StepSolver``) links to the page
+    of the module that defines it (``fesdic_core.solve.solvers.StepSolver``)."""
+    if node.get("refdomain") != "py":
+        return None
+    target = node.get("reftarget", "")
+    module = node.get("py:module")
+    candidates = [target] + ([f"{module}.{target}"] if module else [])
+    for candidate in candidates:
+        if not candidate.split(".")[0] in PACKAGES:
+            continue
+        obj = _resolve(candidate)
+        home, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+        if isinstance(home, str) and isinstance(qualname, str) and f"{home}.{qualname}" != target:
+            return env.get_domain("py").resolve_xref(env, node["refdoc"], app.builder,
+                                                     node["reftype"], f"{home}.{qualname}",
+                                                     node, contnode)
+    return None
+
+
 def setup(app):  # noqa: ANN001, ANN201 (Sphinx's extension entry point)
+    app.connect("missing-reference", _missing_reference)
     app.connect("builder-inited", lambda app: generate(Path(app.srcdir)))
     app.connect("source-read", _source_read)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
