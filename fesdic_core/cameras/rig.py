@@ -39,6 +39,7 @@ from scipy.optimize import least_squares
 
 from fesdic_core.atomic import write_text_atomic
 from fesdic_core.cameras.camera import Camera
+from fesdic_core.errors import FesdicCoreError
 
 logger = logging.getLogger(__name__)
 
@@ -47,7 +48,7 @@ __all__ = ["CalibrationError", "stereo_transform", "place_camera1", "apply_stere
            "read_pyvale_csv", "initial_pose", "initial_rig_pose"]
 
 
-class CalibrationError(ValueError):
+class CalibrationError(FesdicCoreError, ValueError):
     """A calibration file or value that cannot be used; the message names the file and field."""
 
 

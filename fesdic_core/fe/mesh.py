@@ -16,6 +16,7 @@ import logging
 import numpy as np
 import scipy.sparse as sps
 
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.fe.elements import FAMILIES, ElementFamily, centroid, gauss_rule
 
 logger = logging.getLogger(__name__)
@@ -42,7 +43,7 @@ __all__ = [
 DEGENERATE_TOL = 1e-6
 
 
-class MeshError(ValueError):
+class MeshError(FesdicCoreError, ValueError):
     """A mesh is unusable (degenerate, folded or inverted element)."""
 
 
