@@ -44,7 +44,8 @@ DEGENERATE_TOL = 1e-6
 
 
 class MeshError(FesdicCoreError, ValueError):
-    """A mesh is unusable (degenerate, folded or inverted element)."""
+    """A mesh or mesh file is unusable (unreadable, unsupported cells, degenerate, folded or
+    inverted element)."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
