@@ -278,8 +278,8 @@ def _report_bug(argv: Sequence[str] | None) -> None:
     """Print the traceback of the exception being handled, then ask to report it."""
     traceback.print_exc(file=sys.stderr)
     command = " ".join([PROG, *(sys.argv[1:] if argv is None else argv)])
-    sys.stderr.write(f"{PROG}: this is a bug in georeg {installed_version()}, not an error in "
-                     f"your input; please report it to the georeg developers with the "
+    sys.stderr.write(f"{PROG}: this is a bug in georeg (version {installed_version()}), not an "
+                     "error in your input; please report it to the georeg developers with the "
                      f"traceback above and the command: {command}\n")
 
 

@@ -92,9 +92,12 @@ def read_mesh(path: str | os.PathLike) -> SurfaceMesh:
     if not by_type:
         raise MeshError(f"mesh file {path} holds no surface cell of a supported type "
                         f"(triangle, triangle6, quad, quad9)")
-    blocks = tuple(CellBlock(family_from_meshio(t), np.concatenate(data))
-                   for t, data in by_type.items())
-    mesh = SurfaceMesh(points, blocks, name=path.stem)
+    try:                       # e.g. a cell that refers to a node the file does not have
+        blocks = tuple(CellBlock(family_from_meshio(t), np.concatenate(data))
+                       for t, data in by_type.items())
+        mesh = SurfaceMesh(points, blocks, name=path.stem)
+    except ValueError as exc:
+        raise MeshError(f"mesh file {path}: {exc}") from None
     logger.info("read %s: %d nodes, %s", path, mesh.n_nodes,
                 ", ".join(f"{b.n_elements} {b.family.name}" for b in blocks))
     return mesh

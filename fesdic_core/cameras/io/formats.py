@@ -162,9 +162,9 @@ def write_opencv_stereo(path: str | os.PathLike, cameras: Sequence[Camera]) -> P
     """
     path = Path(path)
     if path.suffix.lower() not in _OPENCV_SUFFIXES:
-        raise CalibrationError(f"{path}: expected one of {', '.join(_OPENCV_SUFFIXES)} for an OpenCV file")
+        raise ValueError(f"{path}: expected one of {', '.join(_OPENCV_SUFFIXES)} for an OpenCV file")
     if len(cameras) != 2:
-        raise CalibrationError(f"{path}: a stereo pair needs 2 cameras, got {len(cameras)}")
+        raise ValueError(f"{path}: a stereo pair needs 2 cameras, got {len(cameras)}")
     cam0, cam1 = cameras
     R, T = stereo_transform(cam0, cam1)
     with atomic_path(path) as tmp:
