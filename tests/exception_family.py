@@ -1,8 +1,8 @@
 """Every exception class a package defines, found by importing each of its modules.
 
-Shared by the ``test_errors.py`` of each package: a package's exceptions must all derive
-from that package's base (``FesdicCoreError``, ``GeoregPluginError``, ``AdapterError``,
-``GeoregError``).
+Shared by the ``test_<package>_errors.py`` of each package (one basename per test module:
+the test folders are not packages): a package's exceptions must all derive from that
+package's base (``FesdicCoreError``, ``GeoregPluginError``, ``AdapterError``, ``GeoregError``).
 """
 from __future__ import annotations
 

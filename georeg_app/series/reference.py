@@ -74,7 +74,11 @@ def load_reference(config: TrackConfig, progress: bool = False
         cameras = tuple(read_cameras_json(ref.cameras))
         model = None
         if ref.spline is not None:
-            if "faces" in json.loads(Path(ref.spline).read_text()):
+            try:
+                doc = json.loads(Path(ref.spline).read_text(encoding="utf-8"))
+            except (json.JSONDecodeError, UnicodeDecodeError) as err:
+                raise InputError(f"{ref.spline}: not valid JSON ({err})") from None
+            if isinstance(doc, dict) and "faces" in doc:
                 raise InputError(f"{ref.spline}: the reference is a part of several faces, which "
                                  "a [reference] folder does not rebuild (its nodes' face "
                                  "parameters are not saved); give the part's [geometry] "
