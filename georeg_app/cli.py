@@ -31,7 +31,6 @@ import argparse
 import contextlib
 import importlib
 import logging
-import os
 import sys
 import time
 import traceback
@@ -40,9 +39,13 @@ from typing import Sequence
 
 from georeg_app.config.measure import load_config
 from georeg_app.errors import USER_ERRORS, InputError, MeasurementFailed
+from georeg_app.results import SeriesRun, ShapeRun, check_output_folder
 from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
+
+__all__ = ["main", "build_parser", "progress_enabled", "check_output_folder", "check_scheduler",
+           "MeasurementFailed", "SCHEDULERS"]
 
 PROG = "georeg"
 DEFAULT_DEMO_OUT = "demo_out"
@@ -164,21 +167,6 @@ def _logging_to_stderr(quiet: bool, verbose: bool):
             logging.getLogger(name or None).setLevel(lvl)
 
 
-def check_output_folder(out: Path, overwrite: bool) -> None:
-    """Refuse, before any computing, an output folder that cannot or must not be written."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(f"output folder {out} exists and is not a folder")
-    parent = out.resolve().parent
-    while not parent.exists():
-        parent = parent.parent
-    if not os.access(parent if not out.exists() else out.resolve().parent, os.W_OK | os.X_OK):
-        raise PermissionError(f"output folder {out}: {parent} is not writable")
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        raise FileExistsError(f"output folder {out} is not empty; choose another folder or "
-                              "use --overwrite to replace its contents")
-
-
 def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     if args.command == "track":
@@ -188,7 +176,7 @@ def _run(args: argparse.Namespace) -> Path:
     check_output_folder(out, args.overwrite)                                  # before computing
     from georeg_app.shape.demo import demo_config
     from georeg_app.shape.methods import default_specs, measure_specs
-    from georeg_app.shape.outputs import REPORT_FILE, summary_dict, write_all
+    from georeg_app.shape.outputs import REPORT_FILE
     from georeg_app.shape.pipeline import run_methods
 
     progress = progress_enabled(args.quiet)
@@ -200,9 +188,9 @@ def _run(args: argparse.Namespace) -> Path:
         config = config.with_output_dir(out)
         specs = default_specs(config) if args.command == "compare" else measure_specs(config)
     logger.info("%s: %d method(s): %s", args.command, len(specs), ", ".join(s.label for s in specs))
-    run = run_methods(config, specs, images=images, truth=truth, progress=progress)
-    summary = summary_dict(run)
-    for m in summary["methods"]:
+    run = ShapeRun(run_methods(config, specs, images=images, truth=truth, progress=progress),
+                   command=args.command)
+    for m in run.summary["methods"]:
         if m["status"] != "ok":
             if args.command != "measure":                 # (measure: the error line says it)
                 logger.warning("%-24s FAILED: %s", m["label"], m["failure"])
@@ -212,10 +200,7 @@ def _run(args: argparse.Namespace) -> Path:
         logger.info("%-24s residual %.3f%% (noise floor %s), RMS dist. to BFP %.4f mm, "
                     "error vs truth %s, %d iterations, %.1f s", m["label"], m["residual_percent"],
                     noise, m["distance_to_bfp_rms_mm"], error, m["iterations"], m["time_s"])
-    failed = [m for m in summary["methods"] if m["status"] != "ok"]
-    if failed and (args.command == "measure" or len(failed) == len(summary["methods"])):
-        raise MeasurementFailed("; ".join(f"{m['label']} failed: {m['failure']}" for m in failed))
-    write_all(out, run, overwrite=args.overwrite)
+    run.save(out, overwrite=args.overwrite)       # MeasurementFailed if it cannot be delivered
     return Path(out) / REPORT_FILE
 
 
@@ -232,7 +217,7 @@ def check_scheduler(scheduler: str) -> str:
             importlib.import_module("distributed")
         except ImportError:
             raise InputError(f"--scheduler {scheduler}: Dask is not installed (pip install "
-                               "\"dask[distributed]\"); use --scheduler serial") from None
+                             "\"dask[distributed]\"); use --scheduler serial") from None
     return scheduler
 
 
@@ -245,7 +230,7 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     ``displacement.pvd``; the command fails (status 1, nothing written) only when every frame
     failed.
     """
-    from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE, write_track
+    from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE
     from georeg_app.series.track import run_track
 
     scheduler = check_scheduler(args.scheduler)
@@ -254,15 +239,13 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     out = args.out if args.out is not None else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
     config = config.with_output_dir(out)
-    run = run_track(config, scheduler, progress, workers=args.workers)
+    run = SeriesRun(run_track(config, scheduler, progress, workers=args.workers))
+    run.check()                                   # MeasurementFailed: every frame failed
     failed = [f for f in run.frames if not f.ok]
-    if failed and len(failed) == len(run.frames):
-        raise MeasurementFailed("every frame failed: " + "; ".join(
-            f"frame {f.index}: {f.failure}" for f in failed[:3]) + (" ..." if len(failed) > 3 else ""))
     if failed:
         logger.warning("%d of %d frames failed (marked in %s): %s", len(failed), len(run.frames),
                        SUMMARY_FILE, ", ".join(str(f.index) for f in failed))
-    write_track(out, run, overwrite=args.overwrite)
+    run.save(out, overwrite=args.overwrite)
     return Path(out) / REPORT_FILE
 
 

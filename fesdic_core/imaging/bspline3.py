@@ -11,17 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from fesdic_core.imaging.tensor_sum import tensor_sum_numpy
-
-try:
-    from fesdic_core.imaging import _bspline                       # compiled at install (setup.py), optional
-except ImportError:                              # pragma: no cover - no C compiler at install
-    _bspline = None
+from fesdic_core.imaging.kernels import compiled, tensor_sum_numpy
 
 __all__ = ["COMPILED", "PAD", "weights", "evaluate_compiled", "evaluate_numpy"]
 
 #: True when the compiled 4x4 kernel is in use (else the numpy twin)
-COMPILED = _bspline is not None
+COMPILED = compiled is not None
 #: coefficient padding: covers the 4x4 support of x in [0, n - 1]
 PAD = 2
 
@@ -40,7 +35,7 @@ def weights(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,
                       grad: np.ndarray) -> None:
     """Fill ``value`` (n,) and ``grad`` (n, 2) at ``xy`` (n, 2) with the compiled kernel."""
-    _bspline.evaluate(padded, h, w, PAD, xy, value, grad)
+    compiled.evaluate(padded, h, w, PAD, xy, value, grad)
 
 
 def evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,

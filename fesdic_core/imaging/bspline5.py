@@ -7,23 +7,18 @@ with its exact gradient by one 6x6 tensor-product sum over the coefficients (nod
 The sum runs in the compiled kernel ``fesdic_core.imaging._bspline.evaluate5`` (beside the cubic
 ``evaluate``, sharing its fold and its checks) or, without a C compiler at install, in the numpy twin
 :func:`evaluate_numpy` (same arithmetic, about 20x slower). Coordinates are folded into
-``[0, n - 1]`` by the mirror symmetry, as for the cubic (:func:`fesdic_core.imaging.tensor_sum.fold`).
+``[0, n - 1]`` by the mirror symmetry, as for the cubic (:func:`fesdic_core.imaging.kernels.fold`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from fesdic_core.imaging.tensor_sum import tensor_sum_numpy
-
-try:
-    from fesdic_core.imaging import _bspline                       # compiled at install (setup.py), optional
-except ImportError:                              # pragma: no cover - no C compiler at install
-    _bspline = None
+from fesdic_core.imaging.kernels import compiled, tensor_sum_numpy
 
 __all__ = ["COMPILED", "PAD", "weights", "evaluate_compiled", "evaluate_numpy"]
 
 #: True when the compiled 6x6 kernel is in use (else the numpy twin)
-COMPILED = _bspline is not None
+COMPILED = compiled is not None
 #: coefficient padding: covers the 6x6 support of x in [0, n - 1]
 PAD = 3
 
@@ -49,7 +44,7 @@ def evaluate_compiled(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value:
 
     ``padded``: the (h, w) coefficients padded by :data:`PAD` (numpy "reflect"), raveled.
     """
-    _bspline.evaluate5(padded, h, w, PAD, xy, value, grad)
+    compiled.evaluate5(padded, h, w, PAD, xy, value, grad)
 
 
 def evaluate_numpy(padded: np.ndarray, h: int, w: int, xy: np.ndarray, value: np.ndarray,

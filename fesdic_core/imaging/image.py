@@ -63,12 +63,8 @@ from scipy import ndimage
 
 from fesdic_core.errors import FesdicCoreError
 from fesdic_core.imaging import bspline3, bspline5
+from fesdic_core.imaging.kernels import compiled as _bspline
 from fesdic_core.parallel import for_each_block
-
-try:
-    from fesdic_core.imaging import _bspline                       # compiled at install (setup.py), optional
-except ImportError:                              # pragma: no cover - no C compiler at install
-    _bspline = None
 
 logger = logging.getLogger(__name__)
 

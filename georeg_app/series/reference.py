@@ -63,7 +63,7 @@ def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
                                                                                config.images.cam1))
 
 
-def load_reference(config: TrackConfig, progress: bool = False
+def load_reference(config: TrackConfig, progress=False
                    ) -> tuple[SurfaceMesh, tuple, tuple, NominalModel | None, str]:
     """The reference surface, calibrated cameras, reference images, the spline model (for
     the georeg displacement) and a label saying where they come from."""
@@ -133,7 +133,7 @@ def check_frames(config: TrackConfig, size: tuple[int, int]) -> None:
                                  f"reference images are {size[1]} x {size[0]} px")
 
 
-def series_reference(config: TrackConfig, progress: bool = False) -> SeriesReference:
+def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     """Load or measure the reference and build the displacement reference and solver."""
     mesh, cameras, images, model, label = load_reference(config, progress)
     d = config.displacement

@@ -58,9 +58,15 @@ def run_series(reference: SeriesReference, frames: Sequence[tuple[Path, Path]],
     return results
 
 
-def run_track(config: TrackConfig, scheduler: str = "serial", progress: bool = False,
+def run_track(config: TrackConfig, scheduler: str = "serial",
+              progress: bool | Callable[[str, int, int], None] = False,
               workers: int | None = None) -> TrackRun:
-    """Run the whole series: reference, frames (serially or over Dask), in order."""
+    """Run the whole series: reference, frames (serially or over Dask), in order.
+
+    ``progress``: True for progress bars (tqdm), or a callable ``progress(stage, done,
+    total)`` called after each scale of the reference shape (stage: its method's label)
+    and after each frame (stage ``"frames"``).
+    """
     t0 = time.perf_counter()
     reference = series_reference(config, progress)
     check_frames(config, reference.displacement.images[0].shape)
@@ -69,10 +75,14 @@ def run_track(config: TrackConfig, scheduler: str = "serial", progress: bool = F
                 reference.label, reference.displacement.mesh.n_nodes, len(frames),
                 config.displacement.method, config.displacement.scale_sequence,
                 "incremental" if config.displacement.incremental else "each from rest")
-    with tqdm(total=len(frames), desc="frames", unit="frame", disable=not progress) as bar:
+    with tqdm(total=len(frames), desc="frames", unit="frame", disable=progress is not True) as bar:
+        done = []
         def on_frame(frame: FrameResult) -> None:
             log_frame(frame, len(frames))
             bar.update(1)
+            done.append(frame.index)
+            if callable(progress):
+                progress("frames", len(done), len(frames))
         if scheduler == "serial":
             results = run_series(reference, frames, config.displacement.incremental, on_frame)
         else:

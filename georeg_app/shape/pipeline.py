@@ -14,7 +14,7 @@ import hashlib
 import logging
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -229,7 +229,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
 
 
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
-                truth: Truth | None = None, progress: bool = False) -> RunResult:
+                truth: Truth | None = None,
+                progress: bool | Callable[[str, int, int], None] = False) -> RunResult:
     """Measure the shape with each method of ``specs`` on the same images.
 
     A method that fails (its measurement judged untrustworthy, or an error inside it) is
@@ -242,7 +243,8 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     specs : the methods (see :func:`default_specs`).
     images : the two images, if already loaded (else read from ``config.images``).
     truth : the known surface and cameras of a synthetic run (for the errors).
-    progress : show a progress bar of the scales of each method (tqdm).
+    progress : True: a progress bar of the scales of each method (tqdm); a callable:
+        ``progress(label, done, total)`` after each scale of the method ``label``.
     """
     started = datetime.datetime.now().astimezone().isoformat(timespec="seconds")
     if images is None:
@@ -262,10 +264,12 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     for k, spec in enumerate(specs, start=1):
         logger.info("method %d of %d: %s ...", k, len(specs), spec.label)
         with tqdm(total=len(spec.scales), desc=f"{k}/{len(specs)} {spec.label}", unit="scale",
-                  disable=not progress, leave=False) as bar:
-            def on_scale(done: int, total: int, report) -> None:
+                  disable=progress is not True, leave=False) as bar:
+            def on_scale(done: int, total: int, report, label: str = spec.label) -> None:
                 bar.set_postfix(residual=f"{report.residual_percent:.2f}%")
                 bar.update(1)
+                if callable(progress):
+                    progress(label, done, total)
             result = _measure_one(spec, model, images, cameras, config, truth, on_scale, occluders)
         results.append(result)
         m = result.measurement

@@ -61,6 +61,8 @@ from fesdic_core.solve.tikhonov import TikhonovSolver
 from georeg_plugin.spline.geometries import plate_with_hole, rectangle
 from shape_truth import bounded_shape_error, rms
 
+pytestmark = pytest.mark.slow         # every method on several rendered scenes
+
 TIKHONOV_MM = (5.0, 10.0, 20.0)
 START_LEVELS = 3
 

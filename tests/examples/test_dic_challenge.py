@@ -22,6 +22,8 @@ import cv2
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow         # the Stereo DIC Challenge's real pair
+
 pytest.importorskip("OCP")
 
 HERE = Path(__file__).resolve().parents[2] / "examples" / "dic_challenge"

@@ -22,6 +22,8 @@ from georeg_app.report.figures import georeg_pair
 from shape_truth import bounded_shape_error, rms
 from user_data import perturbed_pose, write_user_data
 
+pytestmark = pytest.mark.slow         # the demo end to end (the README's claims)
+
 COMPARE = """
 [images]
 cam0 = "cam0.png"

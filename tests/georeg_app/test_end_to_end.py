@@ -183,6 +183,7 @@ def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
     _fails_naming(capsys, config, tmp_path / "out", "levels = 4", "100 dofs", "35 nodes", "coarse.vtu")
 
 
+@pytest.mark.slow
 def test_compare_delivers_the_others_when_one_method_fails(case, tmp_path, capsys, monkeypatch):
     """One method breaks inside (its step solver raises a singular system): `georeg compare`
     marks it failed in summary.json and the report, writes the others, and exits 0."""

@@ -19,7 +19,7 @@ from georeg_plugin.spline.geometries import cylinder                    # noqa: 
 from georeg_plugin.io.iges import read_iges_surfaces                # noqa: E402
 from georeg_plugin.io.spline_io import write_iges                   # noqa: E402
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "cad"
+DATA = Path(__file__).resolve().parents[2] / "data" / "cad"
 PLATE_AREA = 60.0 * 40.0 - np.pi * 8.0 ** 2
 
 
@@ -272,6 +272,7 @@ def test_the_faces_not_measured_are_the_occluders():
     assert cad_occluders(DATA / "cylinder.step", None) is None
 
 
+@pytest.mark.slow
 def test_box_with_fillet_is_one_part_welded_everywhere_but_along_the_trimmed_arcs():
     """Its faces split their shared edges differently (the 20 mm side against the 17 mm face
     beside the fillet, ...): the common refinement (georeg_plugin.spline.conforming) gives them the

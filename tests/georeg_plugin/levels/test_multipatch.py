@@ -11,6 +11,7 @@ from georeg_plugin.spline.fe_mesh import fe_mesh_from_spline
 from georeg_plugin.spline.geometries import cylinder, quadrilateral
 from georeg_plugin.spline.patch import SplinePatch
 from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
+from level_checks import assert_in_range, assert_nested, assert_nested_with_rigid_modes
 
 SLOPE = 0.1
 
@@ -72,28 +73,6 @@ def test_a_bicubic_face_is_meshed_on_the_surface(caplog):
     assert "only approximately" in caplog.text and not mesh.exact
     assert_allclose(faces[1].evaluate(mesh.uv[mesh.node_face == 1]),
                     mesh.nodes[mesh.node_face == 1], atol=1e-12)
-
-
-def assert_in_range(C: np.ndarray, fields: np.ndarray, rtol: float) -> None:
-    """The columns of ``fields`` (nodal fields) lie in the range of ``C^T`` (least squares)."""
-    coeffs, *_ = np.linalg.lstsq(C.T, fields, rcond=None)
-    assert np.abs(fields - C.T @ coeffs).max() < rtol * max(np.abs(fields).max(), 1.0)
-
-
-def assert_nested(space, rtol: float = 1e-10) -> None:
-    """Eq. 13 between consecutive levels: each coarser level in the range of the finer one."""
-    for s in range(space.n_levels - 1):
-        assert_in_range(space.operators[s].toarray(), space.operators[s + 1].toarray().T, rtol)
-
-
-def assert_nested_with_rigid_modes(space, normals, X, rtol=1e-12):
-    """:func:`assert_nested`, and the rigid normal motions ``n . (t + w x X)`` in every
-    level's range."""
-    rigid = np.column_stack([normals] + [np.einsum("kd,kd->k", normals, np.cross(e, X))
-                                         for e in np.eye(3)])
-    for s in range(space.n_levels):
-        assert_in_range(space.operators[s].toarray(), rigid, rtol)
-    assert_nested(space)
 
 
 @pytest.mark.parametrize("shape", ["folded", "cylinder"])

@@ -116,6 +116,7 @@ def test_colour_range_ignores_a_failed_method():
     assert colour_range(run.results[:1], lambda r: field(id(r))) == 1.0
 
 
+@pytest.mark.slow
 def test_failed_methods_are_marked_in_the_report_and_figures_drawn():
     run = fake_run(failed={"Tikhonov 10 mm": "none", "FE (multiscale)": "best"}, node_errors=True)
     out = figures.make_figures(run)

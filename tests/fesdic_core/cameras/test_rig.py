@@ -12,7 +12,7 @@ from fesdic_core.cameras.rig import (CalibrationError, apply_stereo, initial_pos
                                      place_camera1, read_cameras_json, read_pyvale_csv,
                                      stereo_extrinsic_jacobian, stereo_transform, write_cameras_json)
 
-DATA = Path(__file__).resolve().parents[2] / "data" / "dic_challenge_stereo"
+DATA = Path(__file__).resolve().parents[3] / "data" / "dic_challenge_stereo"
 DIST = [0.059, 1.58, 6.7e-4, 2.1e-3, -125.6]
 
 

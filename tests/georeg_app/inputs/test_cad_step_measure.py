@@ -28,7 +28,9 @@ from scenes import Scene, cad_scene                                             
 from user_data import write_user_data                                           # noqa: E402
 from test_cad import _config_file        # the [geometry] kind = "cad" config   # noqa: E402
 
-STEP = Path(__file__).resolve().parents[1] / "data" / "cad" / "plate_hole.step"
+pytestmark = pytest.mark.slow         # STEP parts measured end to end
+
+STEP = Path(__file__).resolve().parents[2] / "data" / "cad" / "plate_hole.step"
 L, W, R, BOW, WAVE = 60.0, 40.0, 8.0, 0.04, 0.03
 
 

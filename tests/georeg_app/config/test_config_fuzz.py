@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from georeg_app.config.measure import GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS, load_config
 from georeg_app.config.toml_schema import ConfigError
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "dic_challenge"
+EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "dic_challenge"
 sys.path.insert(0, str(EXAMPLE))
 
 from challenge import config as challenge_config                      # noqa: E402

@@ -9,7 +9,7 @@ import pytest
 from georeg_app.config import measure as config_module
 from georeg_app.config.measure import ConfigError, ConfigFileNotFoundError, load_config
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 GOOD = """
 [images]

@@ -27,6 +27,8 @@ from scenes import cad_nominal, cad_scene
 from shape_truth import bounded_shape_error, rms
 from user_data import write_user_data
 
+pytestmark = pytest.mark.slow         # CAD parts measured end to end
+
 NAMES = {"panel": ["panel"], "folded": ["left", "right"]}
 CONFIG = """
 [images]

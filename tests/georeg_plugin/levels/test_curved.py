@@ -40,6 +40,7 @@ def rigid_normal_modes(nodes, normals):
                             for k in range(3)])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [panel, dome], ids=["cylinder", "dome"])
 def test_vector_levels_are_nested_and_hold_the_rigid_modes(make):
     mesh, normals, space = _space(make())

@@ -16,7 +16,7 @@ from scipy import ndimage
 
 from fesdic_core.imaging.image import Image
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
+ROOT = pathlib.Path(__file__).resolve().parents[3]
 SHAPE = (128, 128)
 
 

@@ -9,7 +9,7 @@ from georeg_plugin.levels.multipatch import NonConformingFacesError, part_mesh, 
 from georeg_plugin.spline.conforming import conforming_faces
 from georeg_plugin.spline.geometries import quadrilateral
 from georeg_plugin.spline.refine import refine_to_elements, refine_uniform
-from test_multipatch import assert_nested_with_rigid_modes
+from level_checks import assert_nested_with_rigid_modes
 
 #: a long face A (x 0..40 along the fold y = 0) meeting two faces B (x 0..25) and C (25..40)
 A = quadrilateral([[0, 0, 0], [40, 0, 0], [40, 20, 4], [0, 20, 4]])
@@ -42,6 +42,7 @@ def test_knot_spans_that_differ_along_an_edge_are_unified():
     assert np.count_nonzero(crease) == 2 * (union.size - 1) + 1       # one node each, welded
 
 
+@pytest.mark.slow
 def test_an_edge_that_meets_two_faces_is_split_where_they_meet():
     """A's edge meets B and C: A gets a C0 knot (multiplicity p = 2) at x = 25; the levels built
     on the conforming faces are nested, glued (the correction continuous across both edges)

@@ -66,6 +66,7 @@ def test_fixed_point_recovers_perturbed_poses_with_the_stereo_relation(twisted_s
     assert m.history[-1]["scale"] == 0
 
 
+@pytest.mark.slow
 def test_fixed_point_with_twelve_unknowns(twisted_scene):
     """Both cameras free: camera 1 off by a further 0.1 degree relative to camera 0."""
     specimen, cameras, images = twisted_scene

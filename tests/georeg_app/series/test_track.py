@@ -24,6 +24,8 @@ from fesdic_core.synthetic.specimen import flat_plate
 from fesdic_core.cameras.rig import write_cameras_json
 from georeg_app import cli
 
+pytestmark = pytest.mark.slow         # series measured end to end, Dask clusters
+
 #: the series: two translations (the second with a rotation), pure noise, a stretch
 MOTIONS = (RigidMotion((0.1, -0.05, 0.05)), RigidMotion((0.2, -0.1, 0.1), rvec=(0.0, 0.002, 0.0)),
            None, StretchMotion(0.005))

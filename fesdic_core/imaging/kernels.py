@@ -1,6 +1,8 @@
-"""The numpy twin of the compiled B-spline kernels: a tensor-product sum over the coefficients.
+"""The B-spline kernels of the image model: the compiled module, and its numpy twin.
 
-Shared by the cubic (:mod:`fesdic_core.imaging.bspline3`) and the quintic
+``compiled`` is the C module ``fesdic_core.imaging._bspline`` (fused value and gradient of
+the cubic, ``evaluate``, and of the quintic, ``evaluate5``), built at install by setup.py, or
+None without a C compiler. Its numpy twin :func:`tensor_sum_numpy` is shared by the cubic (:mod:`fesdic_core.imaging.bspline3`) and the quintic
 (:mod:`fesdic_core.imaging.bspline5`) image models: coordinates folded into ``[0, n - 1]``
 by the spline's mirror symmetry, then the ``size`` x ``size`` sum of the coefficients with
 the 1-D weights and their derivatives, in blocks of points to bound memory.
@@ -9,7 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["fold", "tensor_sum_numpy"]
+try:
+    from fesdic_core.imaging import _bspline as compiled  # compiled at install (setup.py), optional
+except ImportError:                              # pragma: no cover - no C compiler at install
+    compiled = None
+
+__all__ = ["compiled", "fold", "tensor_sum_numpy"]
 
 _BLOCK = 1 << 14                  # points per block of the numpy twin (bounds memory)
 
