@@ -17,6 +17,7 @@ from typing import Mapping
 import numpy as np
 import scipy.sparse as sps
 
+from adapters.errors import LevelMeshError
 from fesdic_core.fe.elements import family_from_meshio
 from fesdic_core.fe.mesh import CellBlock, SurfaceMesh, node_normals
 from fesdic_core.shape.gauge import rigid_normal_modes
@@ -149,14 +150,15 @@ def _check_part_levels(model: NominalModel, n_levels: int) -> None:
     for f, face in enumerate(model.faces):
         ratio = elements_per_span(model, f, face)
         if ratio < 4 ** (n_levels - 1):
-            raise ValueError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
-                             f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "
-                             f"the finest of {n_levels} spline levels needs (Eq. 16); use "
-                             "more elements or fewer levels")
+            raise LevelMeshError(f"nominal model {model.mesh.name!r}: face {f} has {ratio:g} FE "
+                                 f"elements per knot span, fewer than the {4 ** (n_levels - 1)} "
+                                 f"the finest of {n_levels} spline levels needs (Eq. 16); use "
+                                 "more elements or fewer levels")
 
 
 def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str) -> None:
-    """Raise ValueError if an FE element of ``model`` straddles a knot of ``finest``.
+    """Raise :class:`~adapters.errors.LevelMeshError` (a ``ValueError``) if an FE element of
+    ``model`` straddles a knot of ``finest``.
 
     Eq. 16 (the mesh reproduces the spline) needs, besides the degrees, every element of a
     mesh made from the spline to lie inside one knot span of the finest spline level: a
@@ -174,7 +176,7 @@ def check_nested_mesh(model: NominalModel, finest: SplinePatch, level_name: str)
             inside = (breaks[None, :] > lo[:, d, None] + tol) & (breaks[None, :] < hi[:, d, None] - tol)
             if inside.any():
                 e, k = np.argwhere(inside)[0]
-                raise ValueError(
+                raise LevelMeshError(
                     f"nominal model {model.mesh.name!r}: FE element {int(e)} spans "
                     f"{name} = [{lo[e, d]:.4g}, {hi[e, d]:.4g}] across the knot {name} = "
                     f"{breaks[k]:.4g} of {level_name}: the {block.family.name} mesh cannot "

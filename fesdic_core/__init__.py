@@ -23,12 +23,14 @@ from fesdic_core.cameras import (Camera, CalibrationError, read_cameras_json, re
 from fesdic_core.checks import MeasurementInputError
 from fesdic_core.displacement import (DisplacementMeasurement, DisplacementSettings,
                                       displacement_reference, measure_displacement)
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.fe import MeshError, SurfaceMesh, read_mesh, write_mesh
 from fesdic_core.imaging import Image, ImageError, pyramid, read_image
 from fesdic_core.shape import Measurement, MeasurementSettings, ShapeDivergedError, measure
 from fesdic_core.solve import DirectSolver, SingularSystemError, StepSolver, TikhonovSolver
 
 __all__ = ["cameras", "displacement", "fe", "imaging", "residual", "shape", "solve", "synthetic",
+           "FesdicCoreError",
            "Camera", "CalibrationError", "read_cameras_json", "write_cameras_json",
            "read_opencv_stereo", "read_vic3d", "read_dice", "read_pyvale_csv",
            "Image", "ImageError", "read_image", "pyramid",

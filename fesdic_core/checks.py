@@ -12,6 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.fe.mesh import SurfaceMesh, validate_mesh
 from fesdic_core.imaging.image import Image
 from fesdic_core.imaging.noise import MIN_TEXTURE_RATIO, residual_noise_floor
@@ -19,7 +20,7 @@ from fesdic_core.imaging.noise import MIN_TEXTURE_RATIO, residual_noise_floor
 __all__ = ["MeasurementInputError", "check_inputs", "check_scales", "check_texture"]
 
 
-class MeasurementInputError(ValueError):
+class MeasurementInputError(FesdicCoreError, ValueError):
     """Inputs of a measurement that do not fit together (sizes, visibility)."""
 
 

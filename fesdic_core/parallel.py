@@ -22,10 +22,17 @@ import weakref
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["WorkerPool", "default_pool", "default_threads", "for_each_block",
+from fesdic_core.errors import FesdicCoreError
+
+__all__ = ["ThreadCountError", "WorkerPool", "default_pool", "default_threads", "for_each_block",
            "for_each_span", "set_threads", "threads"]
 
 ENV_THREADS = "FESDIC_THREADS"
+
+
+class ThreadCountError(FesdicCoreError, ValueError):
+    """The environment variable ``FESDIC_THREADS`` is not a whole number of threads."""
+
 
 #: set on the threads of every pool: work they submit runs in line (no pool waits on itself)
 _worker = threading.local()
@@ -39,7 +46,7 @@ def default_threads() -> int:
     try:
         return max(1, int(text))
     except ValueError:
-        raise ValueError(f"{ENV_THREADS}={text!r}: expected a whole number of threads") from None
+        raise ThreadCountError(f"{ENV_THREADS}={text!r}: expected a whole number of threads") from None
 
 
 def _check_size(n: int) -> int:

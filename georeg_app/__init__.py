@@ -11,6 +11,7 @@ The Python front of the whole package is :mod:`georeg` (``georeg.measure``, ``ge
 """
 import _georeg_moved  # noqa: F401  (the old flat import paths, kept for one release)
 
+from georeg_app.errors import USER_ERRORS, GeoregError, InputError, MeasurementFailed
 from georeg_app.version import installed_version
 
-__all__ = ["installed_version"]
+__all__ = ["installed_version", "GeoregError", "InputError", "MeasurementFailed", "USER_ERRORS"]

@@ -8,9 +8,15 @@
     georeg track   CONFIG.toml [--out DIR] [--overwrite] [--scheduler S]  # displacement series
 
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
-tracebacks on error), ``--version``. An error prints one line ``georeg: error: <message>``
-on stderr and exits with status 1; nothing is written to the output folder then (all
-outputs are staged and published together, see :mod:`georeg_app.shape.outputs`).
+tracebacks on error), ``--version``. A user error (bad input: a configuration, image,
+calibration, mesh or CAD file, a value that does not fit; any of
+:data:`georeg_app.errors.USER_ERRORS`) prints one line ``georeg: error: <message>`` on
+stderr and exits with status 1; nothing is written to the output folder then (all outputs
+are staged and published together, see :mod:`georeg_app.shape.outputs`).
+
+Exit status: 0 done; 1 user error (or every method / frame failed); 2 bad command-line
+arguments (argparse); 70 a bug in georeg (any other exception: the full traceback is printed,
+then a line asking to report it); 130 interrupted (Ctrl-C).
 
 A measurement that fails its own checks (the residual against the images' noise, an
 unbounded shape, no stagnation; :mod:`fesdic_core.shape.driver`) is an error of ``measure``.
@@ -32,7 +38,8 @@ from pathlib import Path
 from typing import Sequence
 
 from georeg_app.config.measure import load_config
-from georeg_app.results import MeasurementFailed, SeriesRun, ShapeRun, check_output_folder
+from georeg_app.errors import USER_ERRORS, InputError, MeasurementFailed
+from georeg_app.results import SeriesRun, ShapeRun, check_output_folder
 from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
@@ -42,7 +49,9 @@ __all__ = ["main", "build_parser", "progress_enabled", "check_output_folder", "c
 
 PROG = "georeg"
 DEFAULT_DEMO_OUT = "demo_out"
-EXIT_OK, EXIT_ERROR, EXIT_INTERRUPTED = 0, 1, 130
+EXIT_OK, EXIT_ERROR, EXIT_BUG, EXIT_INTERRUPTED = 0, 1, 70, 130   # 70: EX_SOFTWARE (sysexits.h)
+EPILOG = ("exit status: 0 done, 1 user error (one line 'georeg: error: ...'), 2 bad arguments, "
+          f"{EXIT_BUG} a bug in georeg (traceback; please report it), {EXIT_INTERRUPTED} interrupted")
 
 
 def _common(parser: argparse.ArgumentParser, suppress: bool) -> None:
@@ -58,7 +67,8 @@ def _common(parser: argparse.ArgumentParser, suppress: bool) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG, description="FE stereo-DIC shape measurement with multilevel geometric "
-                               "(spline) regularization (Colantonio et al. 2020).")
+                               "(spline) regularization (Colantonio et al. 2020).",
+        epilog=EPILOG)
     parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     _common(parser, suppress=False)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -200,14 +210,14 @@ SCHEDULERS = ("serial", "threads", "processes")
 def check_scheduler(scheduler: str) -> str:
     """The scheduler, checked before any computing (Dask installed for all but "serial")."""
     if scheduler not in SCHEDULERS and not scheduler.startswith("tcp://"):
-        raise ValueError(f"--scheduler {scheduler!r}: expected one of {', '.join(SCHEDULERS)} or "
+        raise InputError(f"--scheduler {scheduler!r}: expected one of {', '.join(SCHEDULERS)} or "
                          "tcp://HOST:PORT")
     if scheduler != "serial":
         try:
             importlib.import_module("distributed")
         except ImportError:
-            raise RuntimeError(f"--scheduler {scheduler}: Dask is not installed (pip install "
-                               "\"dask[distributed]\"); use --scheduler serial") from None
+            raise InputError(f"--scheduler {scheduler}: Dask is not installed (pip install "
+                             "\"dask[distributed]\"); use --scheduler serial") from None
     return scheduler
 
 
@@ -247,10 +257,23 @@ def _error_line(err: BaseException) -> str:
     return " ".join(message.split())          # one line
 
 
+def _report_bug(argv: Sequence[str] | None) -> None:
+    """Print the traceback of the exception being handled, then ask to report it."""
+    traceback.print_exc(file=sys.stderr)
+    command = " ".join([PROG, *(sys.argv[1:] if argv is None else argv)])
+    sys.stderr.write(f"{PROG}: this is a bug in georeg (version {installed_version()}), not an "
+                     "error in your input; please report it to the georeg developers with the "
+                     f"traceback above and the command: {command}\n")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``georeg``; returns the exit status (0 ok, 1 error, 130 interrupted)."""
+    """Entry point of ``georeg``; returns the exit status.
+
+    0 done, 1 a user error (one of :data:`~georeg_app.errors.USER_ERRORS`: one line, the
+    traceback too under ``--verbose``), 70 a bug (any other exception: the traceback and a
+    request to report it), 130 interrupted. argparse exits with status 2 on bad arguments.
+    """
     args = build_parser().parse_args(argv)
-    expected = (ValueError, OSError, RuntimeError, ArithmeticError)
     with _logging_to_stderr(args.quiet, args.verbose):
         t0 = time.perf_counter()
         try:
@@ -258,11 +281,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         except KeyboardInterrupt:
             sys.stderr.write(f"{PROG}: error: interrupted (nothing written)\n")
             return EXIT_INTERRUPTED
-        except expected as err:
+        except USER_ERRORS as err:
             if args.verbose:
                 traceback.print_exc(file=sys.stderr)
             sys.stderr.write(f"{PROG}: error: {_error_line(err)}\n")
             return EXIT_ERROR
+        except Exception:                       # noqa: BLE001 - anything else is a bug
+            _report_bug(argv)
+            return EXIT_BUG
         logger.info("done in %.1f s; report: %s", time.perf_counter() - t0, report.resolve())
     return EXIT_OK
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
+from georeg_app.errors import MeasurementFailed
 from georeg_app.series.outputs import frame_file, track_summary, write_frame_vtu, write_track
 from georeg_app.series.track import TrackRun
 from georeg_app.shape.outputs import method_stems, summary_dict, write_all, write_method_vtu
@@ -31,10 +32,6 @@ __all__ = ["MeasurementFailed", "check_output_folder", "ShapeRun", "SeriesRun"]
 #: the commands a shape run comes from: ``measure`` delivers only if every method is
 #: trusted; ``compare`` and ``demo`` deliver while at least one is
 SHAPE_COMMANDS = ("measure", "compare", "demo")
-
-
-class MeasurementFailed(RuntimeError):
-    """The run finished but its measurement(s) cannot be trusted (the message says why)."""
 
 
 def check_output_folder(out: str | os.PathLike, overwrite: bool,

@@ -13,6 +13,7 @@ returns sparse operators and a solve hook.
 import _georeg_moved  # noqa: F401  (the old flat import paths, kept for one release)
 
 from georeg_plugin import io, levels, spline
+from georeg_plugin.errors import GeoregPluginError, SplineFileError
 from georeg_plugin.io import read_iges, read_spline_json, write_iges, write_spline_json
 from georeg_plugin.levels import (GeometricRegularization, MultilevelSpace, SingularProjectionError,
                                   component_levels, extraction_operator, multilevel_space,
@@ -20,7 +21,7 @@ from georeg_plugin.levels import (GeometricRegularization, MultilevelSpace, Sing
 from georeg_plugin.spline import (SplinePatch, fe_mesh_from_spline, plate_with_hole, rectangle,
                                   refine_uniform)
 
-__all__ = ["io", "levels", "spline",
+__all__ = ["io", "levels", "spline", "GeoregPluginError", "SplineFileError",
            "SplinePatch", "rectangle", "plate_with_hole", "refine_uniform", "fe_mesh_from_spline",
            "MultilevelSpace", "multilevel_space", "extraction_operator", "node_parameters",
            "component_levels", "GeometricRegularization", "SingularProjectionError",

@@ -39,6 +39,7 @@ from scipy.optimize import least_squares
 
 from fesdic_core.atomic import write_text_atomic
 from fesdic_core.cameras.camera import Camera
+from fesdic_core.errors import FesdicCoreError
 
 logger = logging.getLogger(__name__)
 
@@ -47,7 +48,7 @@ __all__ = ["CalibrationError", "stereo_transform", "place_camera1", "apply_stere
            "read_pyvale_csv", "initial_pose", "initial_rig_pose"]
 
 
-class CalibrationError(ValueError):
+class CalibrationError(FesdicCoreError, ValueError):
     """A calibration file or value that cannot be used; the message names the file and field."""
 
 
@@ -216,12 +217,13 @@ def _landmarks(xyz, px, name: str, allow_missing: bool = False) -> tuple[np.ndar
     xyz = np.asarray(xyz, dtype=np.float64)
     px = np.asarray(px, dtype=np.float64)
     if xyz.ndim != 2 or xyz.shape[1] != 3 or px.shape != (len(xyz), 2):
-        raise ValueError(f"{name}: expected xyz_mm (n, 3) and px (n, 2), got {xyz.shape} and {px.shape}")
+        raise CalibrationError(f"{name}: expected xyz_mm (n, 3) and px (n, 2), got {xyz.shape} "
+                               f"and {px.shape}")
     if not np.all(np.isfinite(xyz)):
-        raise ValueError(f"{name}: xyz_mm has {np.count_nonzero(~np.isfinite(xyz))} non-finite values")
+        raise CalibrationError(f"{name}: xyz_mm has {np.count_nonzero(~np.isfinite(xyz))} non-finite values")
     seen = np.all(np.isfinite(px), axis=1)
     if not allow_missing and not seen.all():
-        raise ValueError(f"{name}: px has {np.count_nonzero(~np.isfinite(px))} non-finite values")
+        raise CalibrationError(f"{name}: px has {np.count_nonzero(~np.isfinite(px))} non-finite values")
     return xyz, px
 
 
@@ -242,12 +244,12 @@ def initial_pose(camera: Camera, xyz_mm: np.ndarray, px: np.ndarray) -> Camera:
     """
     xyz, px = _landmarks(xyz_mm, px, f"initial_pose({camera.name})")
     if len(xyz) < 4:
-        raise ValueError(f"initial_pose({camera.name}): need at least 4 landmarks, got {len(xyz)}")
+        raise CalibrationError(f"initial_pose({camera.name}): need at least 4 landmarks, got {len(xyz)}")
     uv, K0 = _without_skew(camera, px)
     obj, img = xyz.reshape(-1, 1, 3), uv.reshape(-1, 1, 2)
     ok, rvec, tvec = cv2.solvePnP(obj, img, K0, camera.dist, flags=cv2.SOLVEPNP_SQPNP)
     if not ok:
-        raise ValueError(f"initial_pose({camera.name}): cv2.solvePnP found no pose")
+        raise CalibrationError(f"initial_pose({camera.name}): cv2.solvePnP found no pose")
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, K0, camera.dist, rvec, tvec)
     posed = camera.with_extrinsics(np.concatenate([rvec.ravel(), tvec.ravel()]))
     rms = float(np.sqrt(np.mean(np.sum((posed.project(xyz) - px) ** 2, axis=1))))
@@ -272,8 +274,8 @@ def initial_rig_pose(cam0: Camera, cam1: Camera, xyz_mm: np.ndarray, px0: np.nda
     _, px1 = _landmarks(xyz_mm, px1, "initial_rig_pose: view 1", allow_missing=True)
     seen0, seen1 = np.all(np.isfinite(px0), axis=1), np.all(np.isfinite(px1), axis=1)
     if max(seen0.sum(), seen1.sum()) < 4:
-        raise ValueError(f"initial_rig_pose: need at least 4 landmarks in one view, got "
-                         f"{seen0.sum()} and {seen1.sum()}")
+        raise CalibrationError(f"initial_rig_pose: need at least 4 landmarks in one view, got "
+                               f"{seen0.sum()} and {seen1.sum()}")
     R = np.asarray(R, dtype=np.float64)
     t = np.asarray(t, dtype=np.float64).ravel()
     if seen0.sum() >= seen1.sum():

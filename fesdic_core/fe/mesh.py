@@ -16,6 +16,7 @@ import logging
 import numpy as np
 import scipy.sparse as sps
 
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.fe.elements import FAMILIES, ElementFamily, centroid, gauss_rule
 
 logger = logging.getLogger(__name__)
@@ -42,8 +43,9 @@ __all__ = [
 DEGENERATE_TOL = 1e-6
 
 
-class MeshError(ValueError):
-    """A mesh is unusable (degenerate, folded or inverted element)."""
+class MeshError(FesdicCoreError, ValueError):
+    """A mesh or mesh file is unusable (unreadable, unsupported cells, degenerate, folded or
+    inverted element)."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

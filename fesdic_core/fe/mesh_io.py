@@ -17,7 +17,7 @@ import numpy as np
 
 from fesdic_core.atomic import atomic_path
 from fesdic_core.fe.elements import family_from_meshio
-from fesdic_core.fe.mesh import CellBlock, SurfaceMesh
+from fesdic_core.fe.mesh import CellBlock, MeshError, SurfaceMesh
 
 logger = logging.getLogger(__name__)
 
@@ -29,14 +29,14 @@ _IGNORED_PREFIXES = ("vertex", "line")
 
 @contextlib.contextmanager
 def _meshio_messages(path: pathlib.Path):
-    """Route meshio's console messages to the log, and its sys.exit to a ValueError."""
+    """Route meshio's console messages to the log, and its sys.exit to a MeshError."""
     buffer = io.StringIO()
     try:
         with contextlib.redirect_stdout(buffer), contextlib.redirect_stderr(buffer):
             yield
     except SystemExit:      # meshio.read exits when no reader accepts the file
         lines = [line for line in buffer.getvalue().splitlines() if line.strip()]
-        raise ValueError(lines[-1] if lines else f"meshio cannot read {path}") from None
+        raise MeshError(lines[-1] if lines else f"meshio cannot read {path}") from None
     finally:
         if buffer.getvalue().strip():
             logger.debug("meshio on %s: %s", path, buffer.getvalue().strip())
@@ -63,8 +63,8 @@ def read_mesh(path: str | os.PathLike) -> SurfaceMesh:
     Raises
     ------
     FileNotFoundError : the file does not exist.
-    ValueError : meshio cannot read it, its points are not 2-D/3-D, it holds an
-        unsupported surface or volume cell type, or no surface cell at all.
+    MeshError : (a ``ValueError``) meshio cannot read it, its points are not 2-D/3-D, it
+        holds an unsupported surface or volume cell type, or no surface cell at all.
     """
     path = pathlib.Path(path)
     if not path.is_file():
@@ -72,11 +72,11 @@ def read_mesh(path: str | os.PathLike) -> SurfaceMesh:
     try:
         raw = _meshio_read(path)
     except Exception as exc:   # meshio raises ReadError, KeyError, ValueError, ...
-        raise ValueError(f"cannot read mesh file {path}: {exc}") from exc
+        raise MeshError(f"cannot read mesh file {path}: {exc}") from exc
     points = np.asarray(raw.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] not in (2, 3):
-        raise ValueError(f"mesh file {path}: points must be (n, 2) or (n, 3), "
-                         f"got {points.shape}")
+        raise MeshError(f"mesh file {path}: points must be (n, 2) or (n, 3), "
+                        f"got {points.shape}")
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
     by_type: dict[str, list[np.ndarray]] = {}
@@ -87,14 +87,17 @@ def read_mesh(path: str | os.PathLike) -> SurfaceMesh:
         try:
             family_from_meshio(cells.type)
         except ValueError as exc:
-            raise ValueError(f"mesh file {path}: {exc}") from None
+            raise MeshError(f"mesh file {path}: {exc}") from None
         by_type.setdefault(cells.type, []).append(np.asarray(cells.data))
     if not by_type:
-        raise ValueError(f"mesh file {path} holds no surface cell of a supported type "
-                         f"(triangle, triangle6, quad, quad9)")
-    blocks = tuple(CellBlock(family_from_meshio(t), np.concatenate(data))
-                   for t, data in by_type.items())
-    mesh = SurfaceMesh(points, blocks, name=path.stem)
+        raise MeshError(f"mesh file {path} holds no surface cell of a supported type "
+                        f"(triangle, triangle6, quad, quad9)")
+    try:                       # e.g. a cell that refers to a node the file does not have
+        blocks = tuple(CellBlock(family_from_meshio(t), np.concatenate(data))
+                       for t, data in by_type.items())
+        mesh = SurfaceMesh(points, blocks, name=path.stem)
+    except ValueError as exc:
+        raise MeshError(f"mesh file {path}: {exc}") from None
     logger.info("read %s: %d nodes, %s", path, mesh.n_nodes,
                 ", ".join(f"{b.n_elements} {b.family.name}" for b in blocks))
     return mesh

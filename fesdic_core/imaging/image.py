@@ -61,6 +61,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.imaging import bspline3, bspline5
 from fesdic_core.imaging.kernels import compiled as _bspline
 from fesdic_core.parallel import for_each_block
@@ -87,7 +88,7 @@ COMPILED_KERNEL5 = bspline5.COMPILED
 _BGR_TO_GRAY = np.array([0.114, 0.587, 0.299])                    # ITU-R BT.601, as cv2
 
 
-class ImageError(ValueError):
+class ImageError(FesdicCoreError, ValueError):
     """An image file or array that cannot be used (unreadable, non-finite, wrong shape)."""
 
 

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from fesdic_core.errors import FesdicCoreError
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 
 __all__ = ["ShapeDivergedError", "judge"]
 
 
-class ShapeDivergedError(RuntimeError):
+class ShapeDivergedError(FesdicCoreError, RuntimeError):
     """The shape left its bounds at a coarse scale: the next scale is not started (its pixel
     quadrature would follow a surface metres wide)."""
 

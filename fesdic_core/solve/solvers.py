@@ -19,13 +19,15 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+from fesdic_core.errors import FesdicCoreError
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["SingularSystemError", "StepSolver", "sparse_solve", "sparse_factor", "seen_dofs",
            "DirectSolver", "CachedFactorization", "inverse_diagonal", "inverse_covariance"]
 
 
-class SingularSystemError(RuntimeError):
+class SingularSystemError(FesdicCoreError, RuntimeError):
     """The Gauss-Newton system is singular (a node sees no integration point)."""
 
 

@@ -24,6 +24,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from georeg_app.errors import GeoregError
+
 __all__ = ["ConfigError", "ConfigFileNotFoundError", "Table", "load_toml", "show", "show_key",
            "show_path", "integer", "count", "number", "positive", "boolean", "string", "table",
            "table_list", "one_of", "strings", "vector", "array", "numbers", "pair", "check",
@@ -32,7 +34,7 @@ __all__ = ["ConfigError", "ConfigFileNotFoundError", "Table", "load_toml", "show
 Converter = Callable[[Any], Any]
 
 
-class ConfigError(ValueError):
+class ConfigError(GeoregError, ValueError):
     """A configuration file is unusable; the message names the file, section and key."""
 
 

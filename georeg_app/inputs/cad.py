@@ -41,6 +41,8 @@ from georeg_plugin.spline.trimmed import grid_triangles
 
 from georeg_plugin.io.cad_kernel import IGES_SUFFIXES, STEP_SUFFIXES, CadFace, kernel_available
 
+from georeg_app.errors import InputError
+
 logger = logging.getLogger(__name__)
 
 __all__ = ["CAD_SUFFIXES", "STEP_SUFFIXES", "check_cad_file", "cad_faces", "cad_part",
@@ -59,10 +61,10 @@ def check_cad_file(path: Path) -> None:
     ``cad`` extra is refused naming it."""
     suffix = Path(path).suffix.lower()
     if suffix in STEP_SUFFIXES and not kernel_available():
-        raise ValueError(f"{path}: STEP files need a CAD kernel: install {CAD_EXTRA}, or "
+        raise InputError(f"{path}: STEP files need a CAD kernel: install {CAD_EXTRA}, or "
                          "export the faces as untrimmed B-spline surfaces in IGES (.igs)")
     if suffix not in CAD_SUFFIXES:
-        raise ValueError(f"{path}: kind = \"cad\" reads IGES ({', '.join(IGES_SUFFIXES)}) or "
+        raise InputError(f"{path}: kind = \"cad\" reads IGES ({', '.join(IGES_SUFFIXES)}) or "
                          f"STEP ({', '.join(STEP_SUFFIXES)}) files, got suffix "
                          f"{suffix or '(none)'!r}")
 
@@ -96,7 +98,7 @@ def read_cad_faces(path: Path) -> list[CadFace]:
             if _NEEDS_KERNEL not in str(err):
                 raise
             if not kernel_available():
-                raise ValueError(f"{err}; install {CAD_EXTRA}") from None
+                raise InputError(f"{err}; install {CAD_EXTRA}") from None
         else:
             return [CadFace(s.label or f"face{k}", s.patch, (), False)
                     for k, s in enumerate(surfaces)]
@@ -120,15 +122,15 @@ def cad_face_indices(path: Path, faces: Sequence | None, every: Sequence[CadFace
     for f in faces:
         if isinstance(f, str):
             if f not in by_name:
-                raise ValueError(f"{path}: no face named {f!r}; its faces: {_describe(every)}")
+                raise InputError(f"{path}: no face named {f!r}; its faces: {_describe(every)}")
             chosen.append(by_name[f])
         elif not 0 <= int(f) < len(every):
-            raise ValueError(f"{path}: face {f} is out of range (the file has "
+            raise InputError(f"{path}: face {f} is out of range (the file has "
                              f"{len(every)}: {_describe(every)})")
         else:
             chosen.append(int(f))
     if len(set(chosen)) != len(chosen):
-        raise ValueError(f"{path}: faces {list(faces)} name a face twice")
+        raise InputError(f"{path}: faces {list(faces)} name a face twice")
     return chosen
 
 
@@ -176,7 +178,7 @@ def cad_triangles(path: Path, deflection_mm: float = 0.01,
     check_cad_file(path)
     if _needs_kernel(path):
         if not kernel_available():
-            raise ValueError(f"{path}: needs a CAD kernel: install {CAD_EXTRA}")
+            raise InputError(f"{path}: needs a CAD kernel: install {CAD_EXTRA}")
         from georeg_plugin.io.cad_kernel import kernel_triangles
         return kernel_triangles(path, deflection_mm, only=only)
     every = read_cad_faces(path)
@@ -228,4 +230,4 @@ def cad_model(path: Path, faces: Sequence | None, elements: int | None,
             logger.info("%s: %s; every face refined %d times", path, err, k)
             return part_model(patches, k, names, "Q9", name=Path(path).stem, loops=loops)
     except ValueError as err:
-        raise ValueError(f"{path}: {err}") from err
+        raise InputError(f"{path}: {err}") from err

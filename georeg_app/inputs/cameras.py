@@ -12,6 +12,7 @@ from fesdic_core.cameras.rig import (initial_rig_pose, read_cameras_json, read_p
 from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import CamerasConfig
+from georeg_app.errors import InputError
 
 __all__ = ["load_cameras"]
 
@@ -22,7 +23,7 @@ def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
     if cameras.file is not None:
         cams = read_cameras_json(cameras.file)
         if len(cams) != 2:
-            raise ValueError(f"{cameras.file}: a stereo pair needs 2 cameras, got {len(cams)}")
+            raise InputError(f"{cameras.file}: a stereo pair needs 2 cameras, got {len(cams)}")
         return cams
     size = [(im.shape[1], im.shape[0]) for im in images]
     if cameras.opencv is not None:

@@ -14,6 +14,8 @@ from fesdic_core.fe.mesh import validate_mesh
 from fesdic_core.fe.mesh_io import read_mesh
 from georeg_plugin.spline.geometries import rectangle
 
+from georeg_app.errors import InputError
+
 __all__ = ["mesh_model"]
 
 
@@ -26,7 +28,7 @@ def mesh_model(path: str | os.PathLike) -> NominalModel:
     validate_mesh(mesh, str(path))                   # errors name the file
     lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
     if hi[2] - lo[2] > 1e-6 * np.ptp(mesh.nodes[:, :2]):
-        raise ValueError(f"{path}: kind = 'mesh' takes a flat mesh in z = 0 "
+        raise InputError(f"{path}: kind = 'mesh' takes a flat mesh in z = 0 "
                          f"(z spans {lo[2]:g}..{hi[2]:g} mm)")
     size = hi - lo
     patch = rectangle(size[0], size[1], center=tuple((lo + hi)[:2] / 2))

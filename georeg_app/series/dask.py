@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 from typing import Callable, Sequence
 
+from georeg_app.errors import InputError
 from georeg_app.series.frames import FrameResult, chained_frame, measure_frame
 from georeg_app.series.reference import SeriesReference
 
@@ -39,8 +40,8 @@ def dask_client(scheduler: str, workers: int | None = None):
     try:
         from distributed import Client, LocalCluster
     except ImportError:
-        raise RuntimeError(f"--scheduler {scheduler}: Dask is not installed (pip install "
-                           "\"dask[distributed]\"), use --scheduler serial") from None
+        raise InputError(f"--scheduler {scheduler}: Dask is not installed (pip install "
+                         "\"dask[distributed]\"), use --scheduler serial") from None
     _quiet_dask_loggers()
     if scheduler.startswith("tcp://"):
         with Client(scheduler) as client:

@@ -30,6 +30,7 @@ from georeg_plugin.levels.solver import GeometricRegularization
 
 from georeg_app.config.measure import Config, OutputConfig
 from georeg_app.config.track import TrackConfig
+from georeg_app.errors import InputError, MeasurementFailed
 from georeg_app.inputs.nominal import build_model
 from georeg_app.shape.methods import measure_specs
 from georeg_app.shape.pipeline import run_methods
@@ -73,8 +74,12 @@ def load_reference(config: TrackConfig, progress=False
         cameras = tuple(read_cameras_json(ref.cameras))
         model = None
         if ref.spline is not None:
-            if "faces" in json.loads(Path(ref.spline).read_text()):
-                raise ValueError(f"{ref.spline}: the reference is a part of several faces, which "
+            try:
+                doc = json.loads(Path(ref.spline).read_text(encoding="utf-8"))
+            except (json.JSONDecodeError, UnicodeDecodeError) as err:
+                raise InputError(f"{ref.spline}: not valid JSON ({err})") from None
+            if isinstance(doc, dict) and "faces" in doc:
+                raise InputError(f"{ref.spline}: the reference is a part of several faces, which "
                                  "a [reference] folder does not rebuild (its nodes' face "
                                  "parameters are not saved); give the part's [geometry] "
                                  '(kind = "cad") and its [cameras] instead, without [reference], '
@@ -89,8 +94,8 @@ def load_reference(config: TrackConfig, progress=False
     run = run_methods(shape_config, specs, images=images, progress=progress)
     result = run.results[0]
     if not result.ok:
-        raise RuntimeError(f"the shape measurement of the reference pair failed "
-                           f"({result.spec.label}): {result.failure}")
+        raise MeasurementFailed(f"the shape measurement of the reference pair failed "
+                                f"({result.spec.label}): {result.failure}")
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
     nominal = build_model(config.geometry, config.method.fixed_levels)
@@ -110,7 +115,7 @@ def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | No
     if method != "georeg":
         raise ValueError(f"unknown displacement method {method!r}")
     if model is None:
-        raise ValueError("[displacement] method = \"georeg\" needs the spline of the reference")
+        raise InputError("[displacement] method = \"georeg\" needs the spline of the reference")
     return GeometricRegularization(displacement_space(model, levels))
 
 
@@ -121,10 +126,10 @@ def check_frames(config: TrackConfig, size: tuple[int, int]) -> None:
         for path in (p0, p1):
             a = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
             if a is None:
-                raise ValueError(f"frame {k}: cannot read image file {path} (not an image "
+                raise InputError(f"frame {k}: cannot read image file {path} (not an image "
                                  "OpenCV can decode)")
             if tuple(a.shape[:2]) != tuple(size):
-                raise ValueError(f"frame {k}: {path} is {a.shape[1]} x {a.shape[0]} px but the "
+                raise InputError(f"frame {k}: {path} is {a.shape[1]} x {a.shape[0]} px but the "
                                  f"reference images are {size[1]} x {size[0]} px")
 
 

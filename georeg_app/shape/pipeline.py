@@ -31,6 +31,7 @@ from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from georeg_plugin.spline.patch import SplinePatch
 
 from georeg_app.config.measure import AUTO, Config, GeometryConfig
+from georeg_app.errors import InputError
 from georeg_app.inputs.cameras import load_cameras
 from georeg_app.inputs.nominal import MIN_PX_PER_ELEMENT, build_model, coarse_faces, refinements
 from georeg_app.shape.demo import Truth
@@ -123,21 +124,21 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
     try:
         check_scales(images, config.method.scale_sequence)
     except MeasurementInputError as err:
-        raise ValueError(f"[method] scales = {config.method.scales}: {err}") from None
+        raise InputError(f"[method] scales = {config.method.scales}: {err}") from None
     if config.geometry.kind == "mesh":
         return
     levels = config.method.fixed_levels
     coarse = sum(int(np.prod(f.n_elements)) for f in coarse_faces(config.geometry))
     asked = config.geometry.elements
     if asked is not None and coarse * 4 ** (levels - 1) > 2 * asked:
-        raise ValueError(
+        raise InputError(
             f"[geometry] elements = {asked}: {levels} spline levels need an FE mesh of at least "
             f"{coarse * 4 ** (levels - 1)} elements (each level halves the knot spans of the "
             f"next); ask for more elements or fewer levels")
     elements = coarse * 4 ** refinements(config.geometry, levels)
     if elements > (w * h) / MIN_PX_PER_ELEMENT:
         largest = max(1, int(math.log((w * h) / MIN_PX_PER_ELEMENT / coarse, 4)) + 1)
-        raise ValueError(
+        raise InputError(
             f"[method] levels = {levels} with [geometry] elements = {config.geometry.elements}: "
             f"the FE mesh would have {elements} elements, more than the {w} x {h} px images "
             f"can measure (at least {MIN_PX_PER_ELEMENT} px an element); use at most "
@@ -152,7 +153,7 @@ def check_levels(model: NominalModel, levels: int, geometry: GeometryConfig) -> 
                for p in model.patches)
     if dofs > model.mesh.n_nodes:
         where = f"[geometry] file = {geometry.file}" if geometry.file else "[geometry]"
-        raise ValueError(f"[method] levels = {levels}: the finest spline level would have {dofs} "
+        raise InputError(f"[method] levels = {levels}: the finest spline level would have {dofs} "
                          f"dofs for the {model.mesh.n_nodes} nodes of the FE mesh ({where}); "
                          "use fewer levels or a finer mesh")
 

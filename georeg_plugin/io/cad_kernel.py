@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from georeg_plugin.errors import SplineFileError
 from georeg_plugin.io.iges import _check_not_degenerate
 from georeg_plugin.spline.patch import SplinePatch
 
@@ -91,14 +92,14 @@ def _read_shape(path: Path):
         from OCP.IGESControl import IGESControl_Reader
         reader = IGESControl_Reader()
     else:
-        raise ValueError(f"{path}: not a STEP ({', '.join(STEP_SUFFIXES)}) or IGES "
-                         f"({', '.join(IGES_SUFFIXES)}) file")
+        raise SplineFileError(f"{path}: not a STEP ({', '.join(STEP_SUFFIXES)}) or IGES "
+                              f"({', '.join(IGES_SUFFIXES)}) file")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     status = reader.ReadFile(str(path))
     if status != IFSelect_RetDone:
-        raise ValueError(f"{path}: unreadable {'STEP' if suffix in STEP_SUFFIXES else 'IGES'} "
-                         f"file (OpenCASCADE status {status})")
+        raise SplineFileError(f"{path}: unreadable {'STEP' if suffix in STEP_SUFFIXES else 'IGES'} "
+                              f"file (OpenCASCADE status {status})")
     reader.TransferRoots()
     return reader.OneShape(), reader
 
@@ -151,7 +152,7 @@ def _bspline(face, where: str):
         nurbs = TopoDS.Face(BRepBuilderAPI_NurbsConvert(face, True).Shape())
         surface = GeomConvert.SurfaceToBSplineSurface_s(BRep_Tool.Surface_s(nurbs))
     except Exception as err:                            # noqa: BLE001 (OCC failure)
-        raise ValueError(f"{where}: not convertible to a B-spline surface ({err})") from None
+        raise SplineFileError(f"{where}: not convertible to a B-spline surface ({err})") from None
     if surface.IsUPeriodic():
         surface.SetUNotPeriodic()
     if surface.IsVPeriodic():
@@ -246,7 +247,7 @@ def read_kernel_faces(path) -> list[CadFace]:
     shape, reader = _read_shape(path)
     faces = _faces(shape)
     if not faces:
-        raise ValueError(f"{path}: no face (surface) in the file")
+        raise SplineFileError(f"{path}: no face (surface) in the file")
     out = []
     for k, face in enumerate(faces):
         name = _name(reader, face) or f"face{k}"
@@ -255,7 +256,7 @@ def read_kernel_faces(path) -> list[CadFace]:
         try:
             patch = _patch(surface)
         except ValueError as err:
-            raise ValueError(f"{where}: {err}") from None
+            raise SplineFileError(f"{where}: {err}") from None
         _check_not_degenerate(patch, where)
         loops = _loops(nurbs)
         if face.Orientation() == TopAbs_REVERSED:
@@ -290,7 +291,7 @@ def kernel_triangles(path, deflection_mm: float = 0.01,
         location = TopLoc_Location()
         mesh = BRep_Tool.Triangulation_s(face, location)
         if mesh is None:
-            raise ValueError(f"{path}: face {k} could not be triangulated")
+            raise SplineFileError(f"{path}: face {k} could not be triangulated")
         transform = location.Transformation()
         nodes = np.array([mesh.Node(i).Transformed(transform).Coord()
                           for i in range(1, mesh.NbNodes() + 1)])

@@ -33,6 +33,7 @@ import pathlib
 
 import numpy as np
 
+from georeg_plugin.errors import SplineFileError
 from georeg_plugin.spline.bspline import _boehm_step
 from georeg_plugin.spline.patch import SplinePatch
 
@@ -109,13 +110,13 @@ def _float(token: str, where: str) -> float:
     try:
         return float(token.replace("D", "E").replace("d", "e")) if token else 0.0
     except ValueError as exc:
-        raise ValueError(f"{where}: {token!r} is not a number") from exc
+        raise SplineFileError(f"{where}: {token!r} is not a number") from exc
 
 
 def _int(token: str, where: str) -> int:
     x = _float(token, where)
     if x != round(x):
-        raise ValueError(f"{where}: {token!r} is not an integer")
+        raise SplineFileError(f"{where}: {token!r} is not an integer")
     return int(x)
 
 
@@ -154,10 +155,10 @@ class _IgesFile:
             if not line.strip():
                 continue
             if len(line) < 73 or line[72] not in "SGDPTC":
-                raise ValueError(f"{path}: line {number} is not an 80-column IGES record")
+                raise SplineFileError(f"{path}: line {number} is not an 80-column IGES record")
             sections.setdefault(line[72], []).append(line)
         if not sections.get("G") or not sections.get("D") or not sections.get("P"):
-            raise ValueError(f"{path}: not an IGES file (missing G, D or P section)")
+            raise SplineFileError(f"{path}: not an IGES file (missing G, D or P section)")
         g_text = "".join(line[:72] for line in sections["G"])
         self.pdelim, self.rdelim = _delimiters(g_text)
         g = _split_params(g_text, self.pdelim, self.rdelim)
@@ -166,12 +167,12 @@ class _IgesFile:
         unit = _int(g[13], f"{path}: G field 14 (unit flag)") if len(g) > 13 and g[13] \
             else 2
         if unit not in IGES_UNITS_MM:
-            raise ValueError(f"{path}: G field 14 (unit flag) {unit} is not supported")
+            raise SplineFileError(f"{path}: G field 14 (unit flag) {unit} is not supported")
         self.to_mm = IGES_UNITS_MM[unit] / (scale or 1.0)
         self.p_lines = sections["P"]
         d = sections["D"]
         if len(d) % 2:
-            raise ValueError(f"{path}: odd number of D lines ({len(d)})")
+            raise SplineFileError(f"{path}: odd number of D lines ({len(d)})")
         self.entries: dict[int, _Entry] = {}
         for k in range(0, len(d), 2):
             a, b = d[k], d[k + 1]
@@ -186,8 +187,8 @@ class _IgesFile:
 
     def entry(self, de: int, referrer: int) -> _Entry:
         if de not in self.entries:
-            raise ValueError(f"{self.where(referrer)} points to directory entry {de}, "
-                             f"which does not exist")
+            raise SplineFileError(f"{self.where(referrer)} points to directory entry {de}, "
+                                  f"which does not exist")
         return self.entries[de]
 
     def params(self, de: int) -> list[str]:
@@ -197,8 +198,8 @@ class _IgesFile:
                        self.p_lines[e.pointer - 1:e.pointer - 1 + e.line_count])
         tokens = _split_params(text, self.pdelim, self.rdelim)
         if not tokens or _float(tokens[0], self.where(de)) != e.type:
-            raise ValueError(f"{self.where(de)}: parameter data starts with "
-                             f"{tokens[:1]!r}, not {e.type}")
+            raise SplineFileError(f"{self.where(de)}: parameter data starts with "
+                                  f"{tokens[:1]!r}, not {e.type}")
         return tokens
 
     def transform(self, de: int) -> np.ndarray:
@@ -206,14 +207,14 @@ class _IgesFile:
         M, seen, current = np.eye(4), [de], self.entries[de].transform
         while current:
             if current in seen:
-                raise ValueError(f"{self.where(de)}: cycle in its transformations {seen}")
+                raise SplineFileError(f"{self.where(de)}: cycle in its transformations {seen}")
             t = self.entry(current, seen[-1])
             if t.type != 124:
-                raise ValueError(f"{self.where(seen[-1])}: transformation pointer to "
-                                 f"entity {t.type} (directory entry {current}), not 124")
+                raise SplineFileError(f"{self.where(seen[-1])}: transformation pointer to "
+                                      f"entity {t.type} (directory entry {current}), not 124")
             v = [_float(x, self.where(current)) for x in self.params(current)[1:13]]
             if len(v) != 12:
-                raise ValueError(f"{self.where(current)}: 12 numbers expected")
+                raise SplineFileError(f"{self.where(current)}: 12 numbers expected")
             step = np.vstack([np.reshape(v, (3, 4)), [0, 0, 0, 1]])
             M = step @ M  # own matrix first, then the one it references
             seen.append(current)
@@ -262,14 +263,14 @@ def _check_not_degenerate(patch: SplinePatch, where: str) -> None:
     x = patch.control_points.reshape(-1, 3)
     s = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
     if s[0] == 0 or s[1] <= 1e-9 * s[0]:
-        raise ValueError(f"{where}: degenerate surface, its control net is collapsed to "
-                         f"a {'point' if s[0] == 0 else 'line'}")
+        raise SplineFileError(f"{where}: degenerate surface, its control net is collapsed to "
+                              f"a {'point' if s[0] == 0 else 'line'}")
     su, sv = patch.sample_parameters(per_span=4)
     uv = np.stack(np.meshgrid(su, sv, indexing="ij"), axis=-1).reshape(-1, 2)
     Su, Sv = patch.derivatives(uv)
     jac = np.linalg.norm(np.cross(Su, Sv), axis=1)
     if np.max(jac) <= 1e-12 * s[0] ** 2:
-        raise ValueError(f"{where}: degenerate surface of zero area")
+        raise SplineFileError(f"{where}: degenerate surface of zero area")
 
 
 def _surface_128(f: _IgesFile, de: int) -> tuple[SplinePatch, str | None]:
@@ -282,22 +283,22 @@ def _surface_128(f: _IgesFile, de: int) -> tuple[SplinePatch, str | None]:
     sizes = [nu + m1 + 1, nv + m2 + 1, nu * nv, 3 * nu * nv, 4]
     n_params = 10 + sum(sizes)
     if min(nu, nv, m1 + 1, m2 + 1) < 1 or len(tokens) < n_params:
-        raise ValueError(f"{where}: {len(tokens) - 10} numbers, {sum(sizes)} expected "
-                         f"for K1={k1}, K2={k2}, M1={m1}, M2={m2}")
+        raise SplineFileError(f"{where}: {len(tokens) - 10} numbers, {sum(sizes)} expected "
+                              f"for K1={k1}, K2={k2}, M1={m1}, M2={m2}")
     values = np.array([_float(t, where) for t in tokens[10:n_params]])
     ku, kv, w, xyz, (u0, u1, v0, v1) = np.split(values, np.cumsum(sizes)[:-1])
     polynomial = prop[2] == 1
     w = np.ones(nu * nv) if polynomial else w
     if not np.all(w > 0):
-        raise ValueError(f"{where}: weights must be > 0 (PROP3 = {prop[2]}: rational)")
+        raise SplineFileError(f"{where}: weights must be > 0 (PROP3 = {prop[2]}: rational)")
     # homogeneous control points (w x, w), indexed [i, j] with i (u) fastest in the file
     cp = xyz.reshape(nv, nu, 3).transpose(1, 0, 2)
     w = w.reshape(nv, nu).T
     H = np.concatenate([cp * w[..., None], w[..., None]], axis=-1)
     for name, (t, p, lo, hi) in (("u", (ku, m1, u0, u1)), ("v", (kv, m2, v0, v1))):
         if not (t[p] - 1e-12 * abs(t[p]) <= lo < hi <= t[-p - 1] + 1e-12 * abs(t[-p - 1])):
-            raise ValueError(f"{where}: parameter range [{lo}, {hi}] in {name} is empty "
-                             f"or outside the knots' range [{t[p]}, {t[-p - 1]}]")
+            raise SplineFileError(f"{where}: parameter range [{lo}, {hi}] in {name} is empty "
+                                  f"or outside the knots' range [{t[p]}, {t[-p - 1]}]")
     try:
         ku, H, in_u = _clamp(ku, m1, H, max(u0, ku[m1]), min(u1, ku[-m1 - 1]))
         kv, H, in_v = _clamp(kv, m2, H.transpose(1, 0, 2), max(v0, kv[m2]),
@@ -308,7 +309,7 @@ def _surface_128(f: _IgesFile, de: int) -> tuple[SplinePatch, str | None]:
         patch = SplinePatch(degrees=(m1, m2), knots=(ku, kv), control_points=cp,
                             weights=None if polynomial else w)
     except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from exc
+        raise SplineFileError(f"{where}: {exc}") from exc
     if prop[3] or prop[4]:
         logger.debug("%s: periodic (PROP4=%d, PROP5=%d), read on [%g, %g] x [%g, %g]",
                      where, prop[3], prop[4], u0, u1, v0, v1)
@@ -337,8 +338,8 @@ def read_iges_surface_entity(path: str | os.PathLike, directory_entry: int) -> I
     f = _IgesFile(path)
     e = f.entries.get(directory_entry)
     if e is None or e.type != 128:
-        raise ValueError(f"{path}: directory entry {directory_entry} is "
-                         f"{'absent' if e is None else f'entity {e.type}'}, not entity 128")
+        raise SplineFileError(f"{path}: directory entry {directory_entry} is "
+                              f"{'absent' if e is None else f'entity {e.type}'}, not entity 128")
     patch, label = _surface_128(f, directory_entry)
     M, placed = _placed(f, directory_entry, patch, None)
     return IgesSurface(directory_entry, 128, label, M, placed)
@@ -380,8 +381,8 @@ def read_iges_surfaces(path: str | os.PathLike) -> list[IgesSurface]:
         elif e.type not in (128, 143, 144):
             skipped[e.type] += 1
     if refused:
-        raise ValueError(f"{f.path}: {len(refused)} surface(s) {_NEEDS_KERNEL}: "
-                         + "; ".join(refused))
+        raise SplineFileError(f"{f.path}: {len(refused)} surface(s) {_NEEDS_KERNEL}: "
+                              + "; ".join(refused))
     if skipped:
         logger.info("%s: skipped %d entities that are not surfaces (%s)", f.path,
                     sum(skipped.values()),
@@ -395,6 +396,6 @@ def read_iges_surfaces(path: str | os.PathLike) -> list[IgesSurface]:
         M, placed = _placed(f, de, patch, outer)
         surfaces.append(IgesSurface(outer or de, 144 if outer else 128, label, M, placed))
     if not surfaces:
-        raise ValueError(f"{f.path}: no surface (entity 128) in the file")
+        raise SplineFileError(f"{f.path}: no surface (entity 128) in the file")
     logger.info("%s: read %d surface(s)", f.path, len(surfaces))
     return surfaces

@@ -33,6 +33,7 @@ import secrets
 
 import numpy as np
 
+from georeg_plugin.errors import SplineFileError
 from georeg_plugin.io.iges import read_iges_surfaces
 from georeg_plugin.spline.patch import SplinePatch
 
@@ -137,7 +138,7 @@ def read_part_json(path: str | os.PathLike) -> list:
     if "faces" not in doc:
         return [read_spline_json(path)]
     if not isinstance(doc["faces"], list) or not doc["faces"]:
-        raise ValueError(f"{path}: field 'faces' must be a non-empty list")
+        raise SplineFileError(f"{path}: field 'faces' must be a non-empty list")
     return [_patch_from_doc(face, f"{path} face {i}") for i, face in enumerate(doc["faces"])]
 
 
@@ -148,22 +149,22 @@ def _load_json(path: str | os.PathLike) -> dict:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from exc
+        raise SplineFileError(f"{path}: not valid JSON ({exc})") from exc
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise ValueError(f"{path}: field 'format' must be {FORMAT!r}")
+        raise SplineFileError(f"{path}: field 'format' must be {FORMAT!r}")
     if doc.get("version") != VERSION:
-        raise ValueError(f"{path}: field 'version' must be {VERSION}, "
-                         f"got {doc.get('version')!r}")
+        raise SplineFileError(f"{path}: field 'version' must be {VERSION}, "
+                              f"got {doc.get('version')!r}")
     return doc
 
 
 def _field(doc: dict, path, name: str, shape_hint: str) -> np.ndarray:
     if name not in doc:
-        raise ValueError(f"{path}: field {name!r} is missing")
+        raise SplineFileError(f"{path}: field {name!r} is missing")
     try:
         return np.asarray(doc[name], dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: field {name!r} must be {shape_hint} ({exc})") from exc
+        raise SplineFileError(f"{path}: field {name!r} must be {shape_hint} ({exc})") from exc
 
 
 def read_spline_json(path: str | os.PathLike) -> SplinePatch:
@@ -173,29 +174,29 @@ def read_spline_json(path: str | os.PathLike) -> SplinePatch:
 
 def _patch_from_doc(doc: dict, path) -> SplinePatch:
     if not isinstance(doc, dict):
-        raise ValueError(f"{path}: expected an object with the fields of a patch")
+        raise SplineFileError(f"{path}: expected an object with the fields of a patch")
     degrees = _field(doc, path, "degrees", "[p, q]")
     if degrees.shape != (2,) or np.any(degrees != np.round(degrees)) or np.any(degrees < 1):
-        raise ValueError(f"{path}: field 'degrees' must be two integers >= 1, "
-                         f"got {doc['degrees']!r}")
+        raise SplineFileError(f"{path}: field 'degrees' must be two integers >= 1, "
+                              f"got {doc['degrees']!r}")
     knots = doc.get("knots")
     if not isinstance(knots, list) or len(knots) != 2:
-        raise ValueError(f"{path}: field 'knots' must hold two knot vectors")
+        raise SplineFileError(f"{path}: field 'knots' must hold two knot vectors")
     knots = tuple(_field({"knots": k}, path, "knots", "a list of numbers") for k in knots)
     cp = _field(doc, path, "control_points", "nested [nu][nv][3]")
     if cp.ndim != 3 or cp.shape[2] != 3:
-        raise ValueError(f"{path}: field 'control_points' must be nested [nu][nv][3], "
-                         f"got shape {cp.shape}")
+        raise SplineFileError(f"{path}: field 'control_points' must be nested [nu][nv][3], "
+                              f"got shape {cp.shape}")
     weights = None
     if doc.get("weights") is not None:
         weights = _field(doc, path, "weights", "nested [nu][nv]")
         if weights.shape != cp.shape[:2]:
-            raise ValueError(f"{path}: field 'weights' has shape {weights.shape}, "
-                             f"expected {cp.shape[:2]}")
+            raise SplineFileError(f"{path}: field 'weights' has shape {weights.shape}, "
+                                  f"expected {cp.shape[:2]}")
     try:
         return _make_patch(degrees.astype(int), knots, cp, weights)
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from exc
+        raise SplineFileError(f"{path}: {exc}") from exc
 
 
 def read_scalar_field(path: str | os.PathLike) -> np.ndarray | None:
@@ -355,6 +356,6 @@ def read_iges(path: str | os.PathLike, entity: int = 0) -> SplinePatch:
     """
     surfaces = read_iges_surfaces(path)
     if len(surfaces) <= entity:
-        raise ValueError(f"{path}: has {len(surfaces)} untrimmed surface(s) (entity 128), "
-                         f"entity index {entity} requested")
+        raise SplineFileError(f"{path}: has {len(surfaces)} untrimmed surface(s) (entity 128), "
+                              f"entity index {entity} requested")
     return surfaces[entity].patch

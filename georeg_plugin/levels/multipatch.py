@@ -33,6 +33,7 @@ from typing import Sequence
 import numpy as np
 import scipy.sparse as sps
 
+from georeg_plugin.errors import GeoregPluginError
 from georeg_plugin.levels.curved import RANK_RTOL, VectorLevel, vector_gluing, vector_level
 from georeg_plugin.levels.operators import MultilevelSpace, extraction_operator
 from georeg_plugin.spline.fe_mesh import ELEMENT_DEGREES, coincident_groups, fe_mesh_from_spline
@@ -46,7 +47,7 @@ __all__ = ["PartMesh", "part_mesh", "part_space", "part_component_space", "isola
            "NonConformingFacesError"]
 
 
-class NonConformingFacesError(ValueError):
+class NonConformingFacesError(GeoregPluginError, ValueError):
     """Two faces meet along an edge whose FE nodes do not coincide."""
 
 

@@ -39,6 +39,7 @@ from typing import Sequence
 import numpy as np
 import scipy.sparse as sps
 
+from georeg_plugin.errors import GeoregPluginError
 from georeg_plugin.levels.curved import vector_level
 from georeg_plugin.spline.fe_mesh import check_element_degree, coincident_groups
 from georeg_plugin.spline.patch import SplinePatch, invert_points
@@ -50,7 +51,7 @@ __all__ = ["extraction_operator", "node_parameters", "MultilevelSpace",
            "multilevel_space", "nested_space", "NodesOutsidePatchError"]
 
 
-class NodesOutsidePatchError(ValueError):
+class NodesOutsidePatchError(GeoregPluginError, ValueError):
     """FE nodes lie outside the spline patch (beyond the tolerance)."""
 
 

@@ -29,6 +29,8 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
+from georeg_plugin.errors import GeoregPluginError
+
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from georeg_plugin.levels.operators import MultilevelSpace
 
@@ -40,7 +42,7 @@ __all__ = ["GeometricRegularization", "SingularProjectionError"]
 _ZERO_PIVOT = 1e-12
 
 
-class SingularProjectionError(np.linalg.LinAlgError):
+class SingularProjectionError(GeoregPluginError, np.linalg.LinAlgError):
     """The projected system ``C_s H C_s^T`` (or ``C_s C_s^T``) is singular.
 
     A subclass of ``numpy.linalg.LinAlgError`` (hence of ``ValueError``).

@@ -31,6 +31,7 @@ import logging
 import numpy as np
 from scipy.spatial import cKDTree
 
+from georeg_plugin.errors import GeoregPluginError
 from georeg_plugin.spline.patch import SplinePatch
 
 logger = logging.getLogger(__name__)
@@ -42,7 +43,7 @@ __all__ = ["SplineFEMesh", "fe_mesh_from_spline", "check_element_degree", "ELEME
 ELEMENT_DEGREES = {"Q4": 1, "Q9": 2, "T3": 1, "T6": 2}
 
 
-class ElementDegreeError(ValueError):
+class ElementDegreeError(GeoregPluginError, ValueError):
     """The spline degree exceeds the element degree: Eq. 16 would not hold."""
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from fesdic_core.shape.verdict import ShapeDivergedError
 from georeg_app import cli
 from georeg_app_fakes import FakeSpec, fake_run
 
@@ -98,7 +99,7 @@ def fake_pipeline(monkeypatch):
     def run_methods(config, specs, *, images=None, truth=None, progress=False):
         calls.update(config=config, specs=list(specs), images=images, truth=truth, progress=progress)
         if calls.get("fail"):
-            raise RuntimeError("shape Gauss-Newton diverged at scale 0 (fixed point 2)")
+            raise ShapeDivergedError("shape Gauss-Newton diverged at scale 0 (fixed point 2)")
         return fake_run(with_spline=False)
 
     def demo_config(out_dir):

@@ -236,6 +236,18 @@ def test_a_reference_folder_lacking_a_file_is_named(series, tmp_path, capsys, mi
     _fails_naming(capsys, _config(work), tmp_path / "out", "[reference] dir", missing)
 
 
+@pytest.mark.parametrize("corrupt", ["fe_cameras.json", "fe.vtu", "fe_spline.json"])
+def test_a_reference_folder_with_an_unreadable_file_is_named(series, tmp_path, capsys, corrupt):
+    """A file of the folder that exists but does not read is a user error (one line, exit 1)
+    naming it, not a bug of georeg."""
+    folder, _ = series
+    work = tmp_path / "w"
+    shutil.copytree(folder, work)
+    (work / "shape_out" / corrupt).write_text("{")
+    displacement = 'method = "georeg"' if corrupt.endswith("_spline.json") else 'method = "fe"'
+    _fails_naming(capsys, _config(work, displacement=displacement), tmp_path / "out", corrupt)
+
+
 def test_georeg_needs_the_reference_spline(series, tmp_path, capsys):
     folder, _ = series
     _fails_naming(capsys, _config(folder, displacement='method = "georeg"'), tmp_path / "out",
