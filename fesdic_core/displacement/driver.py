@@ -50,7 +50,7 @@ from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 from fesdic_core.shape.verdict import judge
 from fesdic_core.solve.gauss_newton import damped_gauss_newton
-from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StepSolver
+from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StartScaleHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
@@ -319,7 +319,7 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     reports, total_iterations, gn, noise_percent, ratios = [], 0, None, float("nan"), [np.inf] * 2
     for k, scale in enumerate(settings.scales, start=1):
         view, imgs = reference.view(scale), [p[scale] for p in pyramids]
-        if callable(getattr(solver, "start_scale", None)):      # (not a CachedFactorization)
+        if isinstance(solver, StartScaleHook):       # (not a CachedFactorization)
             solver.start_scale(scale, None)
         finest = scale == settings.scales[-1]
         gn = displacement_gauss_newton(U, view, imgs, solver, settings.normalisation,

@@ -42,7 +42,7 @@ from fesdic_core.shape.operators import (GaussNewtonLog, ShapeResult, chi_square
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
 from fesdic_core.shape.uncertainty import linearised_state, noise_model, shape_std
 from fesdic_core.shape.verdict import ShapeDivergedError, _diverged, judge
-from fesdic_core.solve.solvers import DirectSolver, StepSolver
+from fesdic_core.solve.solvers import BiasStepHook, DirectSolver, StartScaleHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
@@ -143,7 +143,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         if k == 1:
             check_texture(X_now, first.mask, images, cams)
         noise = residual_noise_floor(X_now, first.mask, imgs, scaled)
-        if callable(getattr(solver, "start_scale", None)):      # a solver that chooses from data
+        if isinstance(solver, StartScaleHook):       # a solver that chooses from data
             state = linearised_state(mesh.nodes, normals, q, quad, imgs, scaled,
                                      settings.normalisation, mask, residual=first)
             solver.start_scale(scale, noise_model(state, X_now, quad, imgs, scaled, normals,
@@ -292,7 +292,7 @@ def _uncertainty(mesh: SurfaceMesh, normals: np.ndarray, node_weights: np.ndarra
         modes, _ = rigid_normal_modes(mesh.nodes, normals)
     std = shape_std(state.H, noise.variance, solver, scale, modes, node_weights)
     bias = None
-    if callable(getattr(solver, "bias_step", None)):
+    if isinstance(solver, BiasStepHook):
         bias = np.abs(solver.bias_step(state.H, state.b, q, scale))
     if std is not None:
         logger.info("shape uncertainty: std median %.3g um, max %.3g um (noise model kappa %.3g)",

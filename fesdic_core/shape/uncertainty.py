@@ -37,7 +37,7 @@ import scipy.sparse.linalg as spla
 from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
 from fesdic_core.shape.operators import chi_square, current_nodes, shape_operators
-from fesdic_core.solve.solvers import seen_dofs
+from fesdic_core.solve.solvers import StepCovarianceHook, seen_dofs
 
 logger = logging.getLogger(__name__)
 
@@ -157,15 +157,15 @@ def shape_std(H: sps.spmatrix, variance: float, solver, scale: int = 0,
     H : the Gauss-Newton matrix at the converged state (Eq. 8).
     variance : ``kappa`` of :func:`noise_model`.
     solver : the step solver; its optional ``step_covariance(H, scale)`` returns
-        ``(diag(C), V -> C V)`` with ``C = G H G^T`` (see :mod:`fesdic_core.solve.solvers`).
+        ``(diag(C), V -> C V)`` with ``C = G H G^T``
+        (:class:`~fesdic_core.solve.solvers.StepCovarianceHook`).
     modes, weights : rigid normal modes (n, k) and nodal weights to project out (the
         gauge of a calibrated measurement), or None.
     """
-    hook = getattr(solver, "step_covariance", None)
-    if hook is None:
+    if not isinstance(solver, StepCovarianceHook):
         logger.info("%r gives no step covariance: no shape uncertainty", solver)
         return None
-    diag, apply = hook(H, scale)
+    diag, apply = solver.step_covariance(H, scale)
     if modes is not None:
         U, V = _projection_out_of(modes, weights)
         CV = apply(V)                                             # C V (n, k)
