@@ -65,7 +65,7 @@ class NoiseModel:
     scale: int
     variance: float
     variance_images: float = float("nan")
-    sigma_gray: tuple[float, float] = (float("nan"), float("nan"))
+    sigma_gray: tuple[float, ...] = (float("nan"), float("nan"))
     residual_ratio: float = float("nan")
     draws: int = 1
 
@@ -162,11 +162,13 @@ def shape_std(H: sps.spmatrix, variance: float, solver, scale: int = 0,
     modes, weights : rigid normal modes (n, k) and nodal weights to project out (the
         gauge of a calibrated measurement), or None.
     """
+    if modes is not None and weights is None:
+        raise ValueError("shape_std: the rigid normal modes to project out need the nodal weights")
     if not isinstance(solver, StepCovarianceHook):
         logger.info("%r gives no step covariance: no shape uncertainty", solver)
         return None
     diag, apply = solver.step_covariance(H, scale)
-    if modes is not None:
+    if modes is not None and weights is not None:
         U, V = _projection_out_of(modes, weights)
         CV = apply(V)                                             # C V (n, k)
         # diag(P C P^T) = diag(C) - 2 rowsum(U * C V) + rowsum(U * (U (V^T C V)))
