@@ -123,7 +123,8 @@ def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
     k = 6 if stereo is not None else 12
     derivative = res.dr_dX if stereo is not None else res.dr_dp
     if derivative is None:
-        raise ValueError(f"calibration: the residual has no {'dr/dX' if stereo is not None else 'dr/dp'}")
+        raise ValueError("calibration: the residual has no "
+                         + ("dr/dX" if stereo is not None else "dr/dp"))
     M, rhs = np.zeros((k, k)), np.zeros(k)
     for start in range(0, len(w), _ROWS):
         rows = slice(start, start + _ROWS)

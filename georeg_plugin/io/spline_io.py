@@ -299,7 +299,8 @@ def write_iges(path: str | os.PathLike, patches, names=None, transforms=None) ->
     if not patches or len(names) != len(patches) or len(transforms) != len(patches):
         raise ValueError(f"{path}: {len(patches)} patches, {len(names)} names, "
                          f"{len(transforms)} transforms: need one each, at least one")
-    entities: list[tuple[int, int, int, str, list, str]] = []  # (type, form, transform DE, label, values, status)
+    # (type, form, transform DE, label, values, status)
+    entities: list[tuple[int, int, int, str, list, str]] = []
     for k, (patch, name, chain) in enumerate(zip(patches, names, transforms)):
         if chain is not None and np.ndim(chain) == 2:
             chain = [chain]
