@@ -7,7 +7,8 @@ The pipeline of Colantonio et al. (2020), sections 2.1-2.2, one subpackage a ste
 - :mod:`fesdic_core.fe`: the surface FE mesh (Eq. 4), mesh I/O and the pixel quadrature;
 - :mod:`fesdic_core.residual`: the gray-level residual (Eq. 3, Remark 2), edges, visibility;
 - :mod:`fesdic_core.solve`: the linear solve of each Gauss-Newton step (the one extension
-  point, :class:`~fesdic_core.solve.StepSolver`), the damped loop, Tikhonov (Eq. 10);
+  point, :class:`~fesdic_core.solve.StepSolver`, and its optional hooks), the damped loop,
+  Tikhonov (Eq. 10);
 - :mod:`fesdic_core.shape`: the shape (Eqs. 7-8), calibration (Eq. 6), the gauge, the
   multiscale fixed point, the uncertainty and the verdict;
 - :mod:`fesdic_core.displacement`: displacements of the measured surface over a series;
@@ -27,7 +28,8 @@ from fesdic_core.errors import FesdicCoreError
 from fesdic_core.fe import MeshError, SurfaceMesh, read_mesh, write_mesh
 from fesdic_core.imaging import Image, ImageError, pyramid, read_image
 from fesdic_core.shape import Measurement, MeasurementSettings, ShapeDivergedError, measure
-from fesdic_core.solve import DirectSolver, SingularSystemError, StepSolver, TikhonovSolver
+from fesdic_core.solve import (BiasStepHook, DirectSolver, FactorizeHook, SingularSystemError,
+                               StartScaleHook, StepCovarianceHook, StepSolver, TikhonovSolver)
 
 __all__ = ["cameras", "displacement", "fe", "imaging", "residual", "shape", "solve", "synthetic",
            "FesdicCoreError",
@@ -35,7 +37,8 @@ __all__ = ["cameras", "displacement", "fe", "imaging", "residual", "shape", "sol
            "read_opencv_stereo", "read_vic3d", "read_dice", "read_pyvale_csv",
            "Image", "ImageError", "read_image", "pyramid",
            "SurfaceMesh", "MeshError", "read_mesh", "write_mesh",
-           "StepSolver", "DirectSolver", "TikhonovSolver", "SingularSystemError",
+           "StepSolver", "StartScaleHook", "StepCovarianceHook", "BiasStepHook", "FactorizeHook",
+           "DirectSolver", "TikhonovSolver", "SingularSystemError",
            "MeasurementSettings", "Measurement", "measure", "MeasurementInputError",
            "ShapeDivergedError",
            "DisplacementSettings", "DisplacementMeasurement", "displacement_reference",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Literal, overload
 
 import cv2
 import numpy as np
@@ -139,7 +140,15 @@ class Camera:
         """
         return self._project(X, True)
 
-    def _project(self, X: np.ndarray, linearise: bool) -> tuple[np.ndarray, "Linearisation | None"]:
+    @overload
+    def _project(self, X: np.ndarray, linearise: Literal[True]) -> tuple[np.ndarray, Linearisation]:
+        ...
+
+    @overload
+    def _project(self, X: np.ndarray, linearise: Literal[False]) -> tuple[np.ndarray, None]:
+        ...
+
+    def _project(self, X: np.ndarray, linearise: bool) -> tuple[np.ndarray, Linearisation | None]:
         X = _points(X)
         R, t = self.R, self.tvec
         inv_z = X @ R[2]                                          # camera frame, one axis a pass

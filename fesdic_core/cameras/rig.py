@@ -194,14 +194,14 @@ def read_pyvale_csv(path: str | os.PathLike, image_size) -> tuple[Camera, Camera
             raise CalibrationError(f"{path}: {key}: non-finite value {values[key]}")
         return values[key]
 
-    sizes = np.asarray(image_size)
-    sizes = [tuple(image_size)] * 2 if sizes.ndim == 1 else [tuple(s) for s in image_size]
+    one_size = np.asarray(image_size).ndim == 1
+    sizes = [tuple(image_size)] * 2 if one_size else [tuple(s) for s in image_size]
     cams = []
     for c in (0, 1):
         p = f"cam{c}_"
-        K = [[get(p + "fx_px"), get(p + "fs_px"), get(p + "cx_px")],
-             [0.0, get(p + "fy_px"), get(p + "cy_px")], [0.0, 0.0, 1.0]]
-        dist = [get(p + k) for k in ("k1", "k2", "p1", "p2", "k3")]
+        K = np.array([[get(p + "fx_px"), get(p + "fs_px"), get(p + "cx_px")],
+                      [0.0, get(p + "fy_px"), get(p + "cy_px")], [0.0, 0.0, 1.0]])
+        dist = np.array([get(p + k) for k in ("k1", "k2", "p1", "p2", "k3")])
         try:
             cams.append(Camera(K, dist, np.zeros(3), np.zeros(3), sizes[c], f"cam{c}"))
         except ValueError as exc:

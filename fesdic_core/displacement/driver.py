@@ -50,7 +50,7 @@ from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 from fesdic_core.shape.verdict import judge
 from fesdic_core.solve.gauss_newton import damped_gauss_newton
-from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StepSolver
+from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StartScaleHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
@@ -173,7 +173,7 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
     if jacobian not in JACOBIANS:
         raise ValueError(f"jacobian must be one of {JACOBIANS}, got {jacobian!r}")
     frozen = jacobian == "reference"
-    if frozen and ref.hessian is None:
+    if frozen and (ref.hessian is None or ref.dr_du is None):
         raise ValueError("jacobian = 'reference' needs a reference view with its Jacobian "
                          "(displacement_reference with DisplacementSettings(jacobian='reference'))")
 
@@ -181,7 +181,7 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
         return displacement_residual(U, ref, images, normalisation, not frozen)
 
     def operators(res: DisplacementResidual):
-        if frozen:                                   # the same H object at every iteration
+        if frozen and ref.dr_du is not None:         # the same H object at every iteration
             return ref.hessian, displacement_rhs(quad, ref.dr_du, res.r)
         return displacement_operators(quad, res)
 
@@ -319,7 +319,7 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     reports, total_iterations, gn, noise_percent, ratios = [], 0, None, float("nan"), [np.inf] * 2
     for k, scale in enumerate(settings.scales, start=1):
         view, imgs = reference.view(scale), [p[scale] for p in pyramids]
-        if callable(getattr(solver, "start_scale", None)):      # (not a CachedFactorization)
+        if isinstance(solver, StartScaleHook):       # (not a CachedFactorization)
             solver.start_scale(scale, None)
         finest = scale == settings.scales[-1]
         gn = displacement_gauss_newton(U, view, imgs, solver, settings.normalisation,
@@ -339,6 +339,8 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                     gn.stop)
         if progress is not None:
             progress(k, len(settings.scales), report)
+    if gn is None:                      # (DisplacementSettings refuses an empty schedule)
+        raise ValueError("measure_displacement: no image scale to measure at")
     failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U,
                                    reference.mesh.nodes, ratios, [im.source for im in images],
                                    reports[-1], settings)

@@ -107,7 +107,9 @@ def reference_view(quad: PixelQuadrature, nodes: np.ndarray, images: Sequence, c
             pull[c] = lin.pull_point(grad)                              # J_c^T grad f_c
     view = ReferenceView(scale=int(scale), quad=quad, X=X, cameras=tuple(cameras),
                          images=tuple(images), f=f, seen=seen)
-    return view if pull is None else reference_jacobian(view, pull, normalisation)
+    if pull is None or normalisation is None:                       # (both or neither)
+        return view
+    return reference_jacobian(view, pull, normalisation)
 
 
 def reference_jacobian(view: ReferenceView, pull: np.ndarray, normalisation: str
@@ -248,7 +250,7 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
         mean1, s1 = statistics(v, m, float(images[c].dynamic_range))
         r[c, span] = np.where(m, (f - mean0) / s0 - (v - mean1) / s1, 0.0)
         sigma_ref[c, span] = s0
-        if jacobian:
+        if pull is not None:                                      # (jacobian)
             pull[c, span] *= np.where(m, -1.0 / s1, 0.0)[:, None]  # dr_c/du = -J^T grad g / s'
 
     def sample(i: int) -> None:
@@ -258,7 +260,7 @@ def displacement_residual(U: np.ndarray, ref: ReferenceView, images: Sequence,
             with np.errstate(invalid="ignore"):
                 mask[c, b] &= (lin.inv_z > 0.0) & image.inside(x)
             x[~mask[c, b]] = 0.0                                  # keep unseen points harmless
-            if jacobian:
+            if pull is not None:                                  # (jacobian)
                 value[c, b], grad = image.evaluate_with_gradient(x)
                 pull[c, b] = lin.pull_point(grad)                  # J_c^T grad g_c
             else:
@@ -305,6 +307,10 @@ def displacement_operators(quad: PixelQuadrature, res: DisplacementResidual
     The products are numpy's own loops (``einsum``), not BLAS: on a loaded machine OpenBLAS's
     threads, started inside the core's thread pool, made them 20 times slower.
     """
+    if res.dr_du is None:
+        raise ValueError("displacement_operators: the residual has no dr/du (computed without "
+                         "its derivative)")
+    dr_du = res.dr_du
     n = 3 * quad.n_nodes
     w = np.where(res.mask, quad.weight_mm2, 0.0)                  # (2, g)
     element_matrices, dofs, b = [], [], np.zeros(n)
@@ -318,7 +324,7 @@ def displacement_operators(quad: PixelQuadrature, res: DisplacementResidual
 
         def element_block(span: slice) -> None:
             points = slice(group.start + span.start * m, group.start + span.stop * m)
-            G = res.dr_du[:, points]                                        # (2, p, 3)
+            G = dr_du[:, points]                                            # (2, p, 3)
             wG = G * w[:, points, None]
             P = np.stack([np.einsum("cp,cp->p", wG[..., k], G[..., l]) for k, l in _PAIRS], -1)
             B = np.einsum("cp,cpk->pk", res.r[:, points], wG)               # (p, 3)

@@ -9,7 +9,7 @@ of Eq. 10 (:class:`ComponentTikhonovSolver`). The Gauss-Newton of
 from __future__ import annotations
 
 import logging
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import scipy.sparse as sps
@@ -17,6 +17,9 @@ import scipy.sparse as sps
 from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.solve.solvers import sparse_factor, sparse_solve
 from fesdic_core.solve.tikhonov import surface_gradient_operator, tikhonov_weight
+
+if TYPE_CHECKING:  # typing only
+    from fesdic_core.shape.uncertainty import NoiseModel
 
 logger = logging.getLogger(__name__)
 
@@ -58,7 +61,7 @@ class ComponentTikhonovSolver:
         self.component_lambdas: dict[int, np.ndarray] = {}
         self._scale: int | None = None
 
-    def start_scale(self, scale: int, noise=None) -> None:
+    def start_scale(self, scale: int, noise: NoiseModel | None = None) -> None:
         """Mark the start of a scale; a coarser one than the current starts a new pass."""
         scale = int(scale)
         if self._scale is not None and scale > self._scale:
@@ -75,7 +78,8 @@ class ComponentTikhonovSolver:
         A3 = self._choose(H, scale)
         return sparse_solve(H + A3, b - A3 @ q, what="H + A3")            # Eq. 10
 
-    def factorize(self, H: sps.spmatrix, scale: int) -> Callable:
+    def factorize(self, H: sps.spmatrix,
+                  scale: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         """``(b, q) -> (H + A3)^-1 (b - A3 q)`` with ``H + A3`` factorized once (the weights
         of the scale chosen from ``H`` if not yet)."""
         A3 = self._choose(H, int(scale))

@@ -147,15 +147,15 @@ _TRI_CORNERS = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)]
 _TRI_MIDS = [(0.5, 0.0), (0.5, 0.5), (0.0, 0.5)]
 
 FAMILIES: dict[str, ElementFamily] = {
-    "T3": ElementFamily("T3", 2, "triangle", 3, "triangle", 1, _TRI_CORNERS,
-                        [[0, 1], [1, 2], [2, 0]]),
-    "T6": ElementFamily("T6", 9, "triangle6", 6, "triangle", 2, _TRI_CORNERS + _TRI_MIDS,
-                        [[0, 1, 3], [1, 2, 4], [2, 0, 5]]),
-    "Q4": ElementFamily("Q4", 3, "quad", 4, "quad", 1, _QUAD_CORNERS,
-                        [[0, 1], [1, 2], [2, 3], [3, 0]]),
+    "T3": ElementFamily("T3", 2, "triangle", 3, "triangle", 1, np.array(_TRI_CORNERS),
+                        np.array([[0, 1], [1, 2], [2, 0]])),
+    "T6": ElementFamily("T6", 9, "triangle6", 6, "triangle", 2, np.array(_TRI_CORNERS + _TRI_MIDS),
+                        np.array([[0, 1, 3], [1, 2, 4], [2, 0, 5]])),
+    "Q4": ElementFamily("Q4", 3, "quad", 4, "quad", 1, np.array(_QUAD_CORNERS),
+                        np.array([[0, 1], [1, 2], [2, 3], [3, 0]])),
     "Q9": ElementFamily("Q9", 10, "quad9", 9, "quad", 2,
-                        _QUAD_CORNERS + _QUAD_MIDS + [(0.0, 0.0)],
-                        [[0, 1, 4], [1, 2, 5], [2, 3, 6], [3, 0, 7]]),
+                        np.array(_QUAD_CORNERS + _QUAD_MIDS + [(0.0, 0.0)]),
+                        np.array([[0, 1, 4], [1, 2, 5], [2, 3, 6], [3, 0, 7]])),
 }
 
 _BY_MESHIO = {family.meshio_type: family for family in FAMILIES.values()}
@@ -192,9 +192,9 @@ def gauss_rule(family: ElementFamily, n_points: int) -> tuple[np.ndarray, np.nda
     if n_points < 1:
         raise ValueError(f"gauss_rule: n_points must be >= 1, got {n_points}")
     t, w = np.polynomial.legendre.leggauss(n_points)
-    a, b = np.meshgrid(t, t, indexing="ij")
+    a, b = (g.ravel() for g in np.meshgrid(t, t, indexing="ij"))
     wa, wb = np.meshgrid(w, w, indexing="ij")
-    a, b, weights = a.ravel(), b.ravel(), (wa * wb).ravel()
+    weights = (wa * wb).ravel()
     if family.reference == "quad":
         return np.column_stack([a, b]), weights
     u = 0.5 * (a + 1.0)                     # [0, 1]

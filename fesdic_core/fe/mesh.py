@@ -327,8 +327,7 @@ def rectangle_mesh(length_mm: float, width_mm: float, nx: int, ny: int, family: 
     y = center[1] + np.linspace(-0.5 * width_mm, 0.5 * width_mm, npy)
     X, Y = np.meshgrid(x, y, indexing="xy")                 # node (i, j) -> j * npx + i
     nodes = np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)])
-    i0, j0 = np.meshgrid(p * np.arange(nx), p * np.arange(ny), indexing="xy")
-    i0, j0 = i0.ravel(), j0.ravel()
+    i0, j0 = (g.ravel() for g in np.meshgrid(p * np.arange(nx), p * np.arange(ny), indexing="xy"))
 
     def node(di, dj):
         return (j0 + dj) * npx + (i0 + di)

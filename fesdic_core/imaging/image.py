@@ -53,6 +53,7 @@ in README "Interpolation bias"); the matching camera is
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from dataclasses import dataclass
@@ -156,6 +157,8 @@ class Image:
     source: str = "array"
     prefilter_px: float = 0.0
     order: int = DEFAULT_ORDER
+    #: the coefficients padded for the kernels, raveled (set by ``__post_init__``)
+    _padded: np.ndarray = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for field in ("values", "coefficients"):

@@ -14,7 +14,7 @@ import numpy as np
 try:
     from fesdic_core.imaging import _bspline as compiled  # compiled at install (setup.py), optional
 except ImportError:                              # pragma: no cover - no C compiler at install
-    compiled = None
+    compiled = None  # type: ignore[assignment]  # the module or None: callers test for None
 
 __all__ = ["compiled", "fold", "tensor_sum_numpy"]
 

@@ -91,7 +91,7 @@ class NoiseFloor:
     contrast: tuple[float, float]
     percent: float
 
-    def texture_ratio(self) -> tuple[float, float]:
+    def texture_ratio(self) -> tuple[float, ...]:
         """Contrast over noise of each image (how much texture stands above the noise)."""
         return tuple(c / s if s > 0 else (np.inf if c > 0 else 0.0)
                      for c, s in zip(self.contrast, self.sigma_gray))

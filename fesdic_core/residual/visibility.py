@@ -276,7 +276,8 @@ def _triangle_planes(Tc: np.ndarray, z_eps: float, margin: float):
 
 
 def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
-                    margin: float = 0.0, owners=None) -> np.ndarray:
+                    margin: float = 0.0,
+                    owners: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Exact segment-triangle test in the camera frame (triangles grown by ``margin`` in u;
     a grown corner is cut at the grown bounding box), candidates from a grid on u."""
     depth = P[:, 2]
@@ -347,7 +348,7 @@ def _occluded_numpy(P: np.ndarray, Tc: np.ndarray, tolerance_mm: float,
         w = c[:, 6] * uu + c[:, 7] * vv + c[:, 8]
         hit = ((l1 >= -c[:, 9]) & (l2 >= -c[:, 10]) & (l1 + l2 <= 1.0 + c[:, 11])
                & (w * reach[pid] > 1.0))                          # 1/w < reach: nearer than X
-        if tri_owner is not None:                                 # not by its own element
+        if tri_owner is not None and point_owner is not None:     # not by its own element
             hit &= tri_owner[t] != point_owner[pid]
         if margin > 0:                                            # the grown corners: cut
             b = box[t]

@@ -13,7 +13,7 @@ from fesdic_core.shape.operators import (current_nodes, shape_operators, GaussNe
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
 from fesdic_core.shape.uncertainty import (NoiseModel, LinearisedState, linearised_state,
                                            noise_model, shape_std)
-from fesdic_core.shape.verdict import ShapeDivergedError, judge
+from fesdic_core.shape.verdict import ShapeDivergedError, VerdictSettings, judge
 
 __all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calibrate_extrinsics",
            "measure", "conclude", "MeasurementInputError", "TANGENTIAL_RTOL", "rigid_normal_modes",
@@ -23,4 +23,5 @@ __all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calib
            "GaussNewtonLog", "ShapeResult", "chi_square", "chi_square_change",
            "predicted_chi_square_change", "shape_gauss_newton", "Measurement",
            "MeasurementSettings", "ScaleReport", "NoiseModel", "LinearisedState",
-           "linearised_state", "noise_model", "shape_std", "ShapeDivergedError", "judge"]
+           "linearised_state", "noise_model", "shape_std", "ShapeDivergedError", "VerdictSettings",
+           "judge"]

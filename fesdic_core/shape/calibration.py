@@ -78,6 +78,8 @@ def truncated_solve(M: np.ndarray, rhs: np.ndarray, rcond: float,
 def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | None) -> np.ndarray:
     """Rows ``G_g = dr_g/dp`` of the calibration problem, (g, 6) or (g, 12), from the
     extrinsic derivative ``res.dr_dp``."""
+    if res.dr_dp is None:
+        raise ValueError("calibration: the residual has no dr/dp (jacobian='extrinsic' needed)")
     g0, g1 = res.dr_dp[:, :6], res.dr_dp[:, 6:]       # grad f0^T dx0/dp0, -grad f1^T dx1/dp1
     if stereo_jacobian is not None:
         return g0 + g1 @ stereo_jacobian                              # camera 1 follows camera 0
@@ -119,10 +121,14 @@ def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
     """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block (with
     the stereo relation kept, ``G = u T`` and ``M = T^T (sum w u u^T) T``)."""
     k = 6 if stereo is not None else 12
+    derivative = res.dr_dX if stereo is not None else res.dr_dp
+    if derivative is None:
+        raise ValueError("calibration: the residual has no "
+                         + ("dr/dX" if stereo is not None else "dr/dp"))
     M, rhs = np.zeros((k, k)), np.zeros(k)
     for start in range(0, len(w), _ROWS):
         rows = slice(start, start + _ROWS)
-        G = _moments(res.dr_dX[rows], X[rows]) if stereo is not None else res.dr_dp[rows]
+        G = _moments(derivative[rows], X[rows]) if stereo is not None else derivative[rows]
         wG = w[rows, None] * G
         M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
         rhs -= wG.T @ res.r[rows]
@@ -191,8 +197,10 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
 
     cams = list(cameras)
     probe = X[np.isfinite(X).all(axis=1)][:: max(1, len(X) // 2000)]   # logs each step in px
-    usable = start is not None and (start.dr_dX if stereo is not None else start.dr_dp) is not None
-    res = start if usable else evaluate(cams)
+    if start is not None and (start.dr_dX if stereo is not None else start.dr_dp) is not None:
+        res = start                                       # the caller's, with the derivative
+    else:
+        res = evaluate(cams)
     converged, it, mu, steps = False, 0, 0.0, 0
     for it in range(1, max_iter + 1):
         std = res.std_percent
@@ -214,9 +222,9 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
                          "%.3g)", it, fall(plain))
             break
 
-        within_noise = []
+        within_noise: list[float] = []
         small = _shift_px(moved(plain), cams, probe) < undamped_px
-        tried = []
+        tried: list[float] = []
 
         def propose(mu: float):                            # Levenberg-Marquardt guard
             if within_noise or (small and tried):  # a small step that failed: stagnant

@@ -42,7 +42,7 @@ from fesdic_core.shape.operators import (GaussNewtonLog, ShapeResult, chi_square
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
 from fesdic_core.shape.uncertainty import linearised_state, noise_model, shape_std
 from fesdic_core.shape.verdict import ShapeDivergedError, _diverged, judge
-from fesdic_core.solve.solvers import DirectSolver, StepSolver
+from fesdic_core.solve.solvers import BiasStepHook, DirectSolver, StartScaleHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
@@ -115,7 +115,9 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
     t0 = time.perf_counter()
     node_weights = nodal_areas(mesh)          # positive for every family (T6 corners too)
     total_iterations, reports = 0, []
-    result = final = None       # final: the last residual with dr_dX, if at the final state
+    result: tuple[GrayLevelResidual, PixelQuadrature] | None = None
+    final: GrayLevelResidual | None = None   # the last residual with dr_dX, if at the final state
+    shape: ShapeResult                       # the last shape Gauss-Newton (set in the loop)
     for k, scale in enumerate(settings.scales, start=1):
         imgs = [p[scale] for p in pyramids]
         scaled = [c.scaled(scale) for c in cams]
@@ -143,7 +145,7 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         if k == 1:
             check_texture(X_now, first.mask, images, cams)
         noise = residual_noise_floor(X_now, first.mask, imgs, scaled)
-        if callable(getattr(solver, "start_scale", None)):      # a solver that chooses from data
+        if isinstance(solver, StartScaleHook):       # a solver that chooses from data
             state = linearised_state(mesh.nodes, normals, q, quad, imgs, scaled,
                                      settings.normalisation, mask, residual=first)
             solver.start_scale(scale, noise_model(state, X_now, quad, imgs, scaled, normals,
@@ -152,7 +154,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         coarse = 2.0 ** scale
         finest = scale == settings.scales[-1]
         fixed_point_converged, previous_residual = not settings.calibrate, np.inf
-        previous_fit, known = None, first   # known: the residual at the current state
+        previous_fit: GrayLevelResidual | None = None
+        known: GrayLevelResidual | None = first   # the residual at the current state
         for fp in range(1, settings.max_fixed_point + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
@@ -212,12 +215,13 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                 fixed_point_converged = True     # the data cannot tell the two states apart
                 break
             previous_fit = shape.residual
-            residual = shape.residual.std_percent
-            if not finest and previous_residual - residual <= settings.fixed_point_rtol * residual:
+            residual_percent = shape.residual.std_percent
+            if (not finest and previous_residual - residual_percent
+                    <= settings.fixed_point_rtol * residual_percent):
                 logger.info("scale %d: the residual stagnates; the next scale goes on", scale)
                 fixed_point_converged = True  # a coarse scale only starts the next (Remark 3)
                 break
-            previous_residual = residual
+            previous_residual = residual_percent
         report = ScaleReport(scale=scale, residual_percent=shape.residual.std_percent,
                              noise_percent=noise.percent, fixed_point_iterations=fp,
                              shape_converged=shape.converged,
@@ -236,6 +240,8 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
                                      "were not started")
         if progress is not None:
             progress(k, len(settings.scales), report)
+    if result is None:                  # (MeasurementSettings refuses an empty schedule)
+        raise ValueError("measure: no image scale to measure at")
     residual, quad = result
     return conclude(mesh, imgs, cams, solver, settings, q, quad, normals, residual, tuple(reports),
                     noise.sigma_gray, mask=mask, final=final, history=tuple(log.records),
@@ -292,7 +298,7 @@ def _uncertainty(mesh: SurfaceMesh, normals: np.ndarray, node_weights: np.ndarra
         modes, _ = rigid_normal_modes(mesh.nodes, normals)
     std = shape_std(state.H, noise.variance, solver, scale, modes, node_weights)
     bias = None
-    if callable(getattr(solver, "bias_step", None)):
+    if isinstance(solver, BiasStepHook):
         bias = np.abs(solver.bias_step(state.H, state.b, q, scale))
     if std is not None:
         logger.info("shape uncertainty: std median %.3g um, max %.3g um (noise model kappa %.3g)",

@@ -48,6 +48,10 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
     ``Phi_e[g, i] = L_i(xi_g) (dr/dX_g . n_i)`` (m, nn), ``H_e = Phi_e^T W Phi_e`` and
     ``b_e = -Phi_e^T W r``, then the usual finite-element scatter into the global system.
     """
+    if res.dr_dX is None:
+        raise ValueError("shape_operators: the residual has no dr/dX (computed without its "
+                         "derivative)")
+    dr_dX = res.dr_dX
     w = np.where(res.mask, quad.weight_mm2, 0.0)
     n = normals.shape[0]
     element_matrices, b = [], np.zeros(n)
@@ -57,7 +61,7 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
 
         def element_block(span: slice) -> None:
             points = slice(group.start + span.start * m, group.start + span.stop * m)
-            g = res.dr_dX[points].reshape(-1, m, 3)                  # dr/dX = J0^T df0 - J1^T df1
+            g = dr_dX[points].reshape(-1, m, 3)                  # dr/dX = J0^T df0 - J1^T df1
             n_e = normals[group.connectivity[span]]                    # (e, nn, 3)
             phi = (g @ n_e.transpose(0, 2, 1)) * group.N               # L_I (g . n_I), (e, m, nn)
             wphi = phi * w[points].reshape(-1, m, 1)

@@ -37,7 +37,7 @@ import scipy.sparse.linalg as spla
 from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
 from fesdic_core.shape.operators import chi_square, current_nodes, shape_operators
-from fesdic_core.solve.solvers import seen_dofs
+from fesdic_core.solve.solvers import StepCovarianceHook, seen_dofs
 
 logger = logging.getLogger(__name__)
 
@@ -65,7 +65,7 @@ class NoiseModel:
     scale: int
     variance: float
     variance_images: float = float("nan")
-    sigma_gray: tuple[float, float] = (float("nan"), float("nan"))
+    sigma_gray: tuple[float, ...] = (float("nan"), float("nan"))
     residual_ratio: float = float("nan")
     draws: int = 1
 
@@ -157,16 +157,18 @@ def shape_std(H: sps.spmatrix, variance: float, solver, scale: int = 0,
     H : the Gauss-Newton matrix at the converged state (Eq. 8).
     variance : ``kappa`` of :func:`noise_model`.
     solver : the step solver; its optional ``step_covariance(H, scale)`` returns
-        ``(diag(C), V -> C V)`` with ``C = G H G^T`` (see :mod:`fesdic_core.solve.solvers`).
+        ``(diag(C), V -> C V)`` with ``C = G H G^T``
+        (:class:`~fesdic_core.solve.solvers.StepCovarianceHook`).
     modes, weights : rigid normal modes (n, k) and nodal weights to project out (the
         gauge of a calibrated measurement), or None.
     """
-    hook = getattr(solver, "step_covariance", None)
-    if hook is None:
+    if modes is not None and weights is None:
+        raise ValueError("shape_std: the rigid normal modes to project out need the nodal weights")
+    if not isinstance(solver, StepCovarianceHook):
         logger.info("%r gives no step covariance: no shape uncertainty", solver)
         return None
-    diag, apply = hook(H, scale)
-    if modes is not None:
+    diag, apply = solver.step_covariance(H, scale)
+    if modes is not None and weights is not None:
         U, V = _projection_out_of(modes, weights)
         CV = apply(V)                                             # C V (n, k)
         # diag(P C P^T) = diag(C) - 2 rowsum(U * C V) + rowsum(U * (U (V^T C V)))

@@ -7,12 +7,30 @@ coarse scale stops the measurement there (:class:`ShapeDivergedError`).
 """
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
 from fesdic_core.errors import FesdicCoreError
-from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
+from fesdic_core.shape.settings import ScaleReport
 
-__all__ = ["ShapeDivergedError", "judge"]
+__all__ = ["ShapeDivergedError", "VerdictSettings", "judge"]
+
+
+class VerdictSettings(Protocol):
+    """What the verdict reads of a measurement's settings: those of the shape
+    (:class:`~fesdic_core.shape.settings.MeasurementSettings`) or of a displacement
+    (:class:`~fesdic_core.displacement.driver.DisplacementSettings`)."""
+
+    @property
+    def consistency_factor(self) -> float:
+        """The final residual may be at most this many times the noise floor."""
+        ...
+
+    @property
+    def max_shape_fraction(self) -> float:
+        """The correction may reach at most this fraction of the mesh's size."""
+        ...
 
 
 class ShapeDivergedError(FesdicCoreError, RuntimeError):
@@ -20,7 +38,7 @@ class ShapeDivergedError(FesdicCoreError, RuntimeError):
     quadrature would follow a surface metres wide)."""
 
 
-def _diverged(q: np.ndarray, nodes: np.ndarray, settings: MeasurementSettings) -> str | None:
+def _diverged(q: np.ndarray, nodes: np.ndarray, settings: VerdictSettings) -> str | None:
     """Why the correction ``q`` is unbounded (``max_shape_fraction`` of the mesh), or None."""
     size = float(np.linalg.norm(np.ptp(nodes, axis=0)))
     largest = float(np.max(np.abs(q))) if q.size else 0.0
@@ -31,7 +49,7 @@ def _diverged(q: np.ndarray, nodes: np.ndarray, settings: MeasurementSettings) -
 
 
 def judge(residual_percent: float, noise_percent: float, q: np.ndarray, nodes: np.ndarray,
-          finest: ScaleReport, settings: MeasurementSettings) -> str | None:
+          finest: ScaleReport, settings: VerdictSettings) -> str | None:
     """Why a measurement cannot be trusted, or None (see the module docstring)."""
     if not np.isfinite(residual_percent):
         return "no integration point is seen by both cameras at the finest scale"

@@ -99,7 +99,7 @@ def damped_gauss_newton(q0: np.ndarray, start, evaluate: Callable, operators: Ca
                 logger.debug("%s: the next step (max|d| %.2e) is stagnant (%s)", name, step,
                              stagnant)
                 break
-        within_noise = []
+        within_noise: list[float] = []
 
         def propose(mu: float):
             if within_noise:                          # more damping only shortens a stagnant step

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Callable, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.linalg as sla
@@ -21,9 +21,13 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from fesdic_core.errors import FesdicCoreError
 
+if TYPE_CHECKING:  # typing only: the shape package imports this one
+    from fesdic_core.shape.uncertainty import NoiseModel
+
 logger = logging.getLogger(__name__)
 
-__all__ = ["SingularSystemError", "StepSolver", "sparse_solve", "sparse_factor", "seen_dofs",
+__all__ = ["SingularSystemError", "StepSolver", "StartScaleHook", "StepCovarianceHook",
+           "BiasStepHook", "FactorizeHook", "sparse_solve", "sparse_factor", "seen_dofs",
            "DirectSolver", "CachedFactorization", "inverse_diagonal", "inverse_covariance"]
 
 
@@ -56,24 +60,102 @@ class StepSolver(Protocol):
         ...
 
 
-# Optional methods of a step solver, used when present (duck typing):
-#
-# start_scale(scale, noise) -> None
-#     called before the shape Gauss-Newton of each image scale (again in later fixed-point
-#     iterations of the same scale) with the scale's noise model
-#     (:class:`fesdic_core.shape.uncertainty.NoiseModel`: ``Cov(b) ~= noise.variance * H``), for
-#     solvers that choose their regularization from the data;
-# step_covariance(H, scale) -> (diag, apply)
-#     the covariance of the step ``d = G b`` per unit noise: ``C = G H G^T``, as its
-#     diagonal (n,) and the action ``V (n, k) -> C V``; the shape uncertainty
-#     (:func:`fesdic_core.shape.uncertainty.shape_std`);
-# bias_step(H, b, q, scale) -> (n,)
-#     how much the shape would move, linearised at the converged state, if the
-#     regularization were one notch weaker (zeros for none): the bias indicator;
-# factorize(H, scale) -> step(b, q) -> d
-#     the step's map for a fixed ``H`` with its factorization done once: ``step(b, q)`` must
-#     equal ``solve(H, b, q, scale)``. Used by :class:`CachedFactorization` when ``H`` is the
-#     same from one iteration to the next (the displacement's modified Gauss-Newton).
+# Optional hooks of a step solver. The core looks for each with ``isinstance(solver, Hook)``
+# (runtime-checkable protocols: a solver implements them by having the method, without
+# importing the core; the plugin's solver does so). A method that exists only through a
+# ``__getattr__`` that forwards to a wrapped solver is seen on Python 3.11 but not from 3.12
+# on (``isinstance`` then looks attributes up statically): a wrapper defines the hooks it
+# forwards.
+
+
+@runtime_checkable
+class StartScaleHook(Protocol):
+    """A step solver that chooses its regularization from the data of each image scale.
+
+    The shape driver calls ``start_scale(scale, noise)`` before the shape Gauss-Newton of each
+    image scale (and again in the later fixed-point iterations of the same scale), with the
+    scale's noise model; the displacement driver calls it with ``noise=None`` at the start of
+    each scale.
+
+    Parameters of ``start_scale``
+    -----------------------------
+    scale : int
+        Image scale about to be solved (0 is the finest).
+    noise : :class:`fesdic_core.shape.uncertainty.NoiseModel` or None
+        ``Cov(b) ~= noise.variance * H`` at the scale's first state; None when the caller
+        has no noise model (the displacement).
+    """
+
+    def start_scale(self, scale: int, noise: NoiseModel | None) -> None:
+        ...
+
+
+@runtime_checkable
+class StepCovarianceHook(Protocol):
+    """A step solver that gives the covariance of its step, for the shape uncertainty
+    (:func:`fesdic_core.shape.uncertainty.shape_std`, at the converged state).
+
+    Parameters of ``step_covariance``
+    ---------------------------------
+    H : scipy.sparse matrix, (n, n)
+        ``H_FE`` of Eq. 8 at the converged state.
+    scale : int
+        Image scale (the finest of the schedule).
+
+    Returns
+    -------
+    diag : ndarray, (n,)
+        The diagonal of ``C = G H G^T``, the covariance of the step ``d = G b`` per unit noise
+        (``Cov(b) = H``).
+    apply : callable
+        ``V (n, k) -> C V (n, k)``.
+    """
+
+    def step_covariance(self, H: sps.spmatrix,
+                        scale: int) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        ...
+
+
+@runtime_checkable
+class BiasStepHook(Protocol):
+    """A step solver that gives the bias indicator of its regularization (the shape driver
+    calls it once, at the converged state of the finest scale).
+
+    Parameters of ``bias_step``: those of :meth:`StepSolver.solve`.
+
+    Returns
+    -------
+    d : ndarray, (n,)
+        How much the shape would move, linearised at the converged state, if the
+        regularization were one notch weaker (zeros for a solver without regularization).
+    """
+
+    def bias_step(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
+        ...
+
+
+@runtime_checkable
+class FactorizeHook(Protocol):
+    """A step solver whose step for a fixed ``H`` can be factorized once.
+
+    :class:`CachedFactorization` calls ``factorize(H, scale)`` once per ``H`` (the same object
+    from one iteration to the next: the displacement's modified Gauss-Newton) and serves the
+    later steps with the map it returns.
+
+    Parameters of ``factorize``
+    ---------------------------
+    H : scipy.sparse matrix, (n, n)
+    scale : int
+
+    Returns
+    -------
+    step : callable
+        ``(b (n,), q (n,)) -> d (n,)``, equal to ``solve(H, b, q, scale)``.
+    """
+
+    def factorize(self, H: sps.spmatrix,
+                  scale: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        ...
 
 
 def sparse_solve(H: sps.spmatrix, b: np.ndarray, what: str = "H_FE") -> np.ndarray:
@@ -128,12 +210,14 @@ class DirectSolver:
     def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         return sparse_solve(H, b)
 
-    def factorize(self, H: sps.spmatrix, scale: int) -> Callable:
+    def factorize(self, H: sps.spmatrix,
+                  scale: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         """``(b, q) -> H^-1 b`` with ``H`` factorized once (:func:`sparse_factor`)."""
         solve = sparse_factor(H)
         return lambda b, q: solve(b)
 
-    def step_covariance(self, H: sps.spmatrix, scale: int):
+    def step_covariance(self, H: sps.spmatrix,
+                        scale: int) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
         """``G H G^T = H^-1`` (:func:`inverse_covariance`)."""
         return inverse_covariance(H)
 
@@ -162,17 +246,17 @@ class CachedFactorization:
     def __init__(self, solver: StepSolver, max_entries: int = 8):
         self.solver = solver
         self.max_entries = int(max_entries)
-        self._steps: dict = {}
+        self._steps: dict[tuple[int, int],
+                          tuple[sps.spmatrix, Callable[[np.ndarray, np.ndarray], np.ndarray]]] = {}
         self._lock = threading.Lock()
 
     def solve(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
-        factorize = getattr(self.solver, "factorize", None)
-        if not callable(factorize):
+        if not isinstance(self.solver, FactorizeHook):
             return self.solver.solve(H, b, q, scale)
         key = (int(scale), id(H))
         entry = self._steps.get(key)
         if entry is None or entry[0] is not H:
-            entry = (H, factorize(H, scale))
+            entry = (H, self.solver.factorize(H, scale))
             with self._lock:
                 self._steps[key] = entry
                 while len(self._steps) > self.max_entries:
@@ -186,7 +270,7 @@ class CachedFactorization:
         return {"solver": self.solver, "max_entries": self.max_entries}
 
     def __setstate__(self, state: dict) -> None:
-        self.__init__(state["solver"], state["max_entries"])
+        CachedFactorization.__init__(self, state["solver"], state["max_entries"])
 
     def __repr__(self) -> str:
         return f"CachedFactorization({self.solver!r})"

@@ -30,6 +30,7 @@ the weight at each scale by Mallows' Cp over a grid of lengths
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import scipy.sparse as sps
@@ -39,6 +40,9 @@ from fesdic_core.fe.elements import gauss_rule
 from fesdic_core.fe.mesh import SurfaceMesh, assemble
 from fesdic_core.solve.solvers import sparse_solve
 from fesdic_core.solve.tikhonov_choice import CpCurve, covariance_diagonal, length_grid, mallows_cp
+
+if TYPE_CHECKING:  # typing only: the shape package imports this one
+    from fesdic_core.shape.uncertainty import NoiseModel
 
 logger = logging.getLogger(__name__)
 
@@ -148,7 +152,7 @@ class TikhonovSolver:
         self.nodes = mesh.nodes
         self.A = surface_gradient_operator(mesh)
         self.auto = self.length_mm == "auto"
-        if not self.auto:                   # fail now if scale 0's cosine probe aliases
+        if not isinstance(self.length_mm, str):     # fail now if scale 0's cosine probe aliases
             tikhonov_weight(sps.identity(mesh.n_nodes, format="csr"), self.A, self.nodes,
                             self.length_mm)
         self.grid_mm = length_grid(mesh) if self.auto else None
@@ -173,7 +177,7 @@ class TikhonovSolver:
             self.reset()
         self._scale = scale
 
-    def start_scale(self, scale: int, noise=None) -> None:
+    def start_scale(self, scale: int, noise: NoiseModel | None = None) -> None:
         """Mark the start of image scale ``scale`` (coarse to fine; Remark 3).
 
         ``noise``: the scale's noise model, read for ``noise.variance`` (``kappa``, with
@@ -188,8 +192,9 @@ class TikhonovSolver:
             self._kappa[scale] = float(variance)
 
     def _choose(self, H: sps.spmatrix, b: np.ndarray, q: np.ndarray, scale: int) -> None:
-        if not self.auto:
-            length = self.length_mm * 2.0 ** scale                     # Remark 3
+        grid = self.grid_mm                                            # None: a fixed length
+        if grid is None:
+            length = float(self.length_mm) * 2.0 ** scale              # Remark 3
             lam = tikhonov_weight(H, self.A, self.nodes, length)
             logger.info("tikhonov scale %d: length %.4g mm (%.4g mm x 2**%d), lambda %.4g",
                         scale, length, self.length_mm, scale, lam)
@@ -199,15 +204,15 @@ class TikhonovSolver:
                 raise ValueError(
                     f"tikhonov_length_mm='auto' needs the noise variance of scale {scale} "
                     f"(got {kappa!r}): call start_scale(scale, noise) before solving")
-            lams = np.array([tikhonov_weight(H, self.A, self.nodes, l) for l in self.grid_mm])
-            curve = mallows_cp(H, b, q, self.A, lams, kappa, self.grid_mm)
+            lams = np.array([tikhonov_weight(H, self.A, self.nodes, l) for l in grid])
+            curve = mallows_cp(H, b, q, self.A, lams, kappa, grid)
             self.cp_curves[scale] = curve
             best = curve.best
-            length, lam = float(self.grid_mm[best]), float(lams[best])
+            length, lam = float(grid[best]), float(lams[best])
             edge = " (at the edge of the grid)" if best in (0, len(lams) - 1) else ""
             logger.info("tikhonov scale %d: Mallows' Cp over %d lengths %.3g..%.3g mm (kappa "
                         "%.3g, %s trace): length %.4g mm%s, lambda %.4g, %.1f of %d dofs", scale,
-                        len(lams), self.grid_mm[0], self.grid_mm[-1], kappa,
+                        len(lams), grid[0], grid[-1], kappa,
                         "exact" if curve.exact_trace else "Hutchinson", length, edge, lam,
                         curve.dof[best], H.shape[0])
         self.lambdas[scale] = float(lam)
@@ -239,7 +244,8 @@ class TikhonovSolver:
         """
         return covariance_diagonal(H, self.A, self._lambda(int(scale)))
 
-    def step_covariance(self, H: sps.spmatrix, scale: int):
+    def step_covariance(self, H: sps.spmatrix,
+                        scale: int) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
         """The step's covariance per unit noise for :func:`fesdic_core.shape.uncertainty.shape_std`:
         ``diag(G H G)`` (:meth:`covariance_diagonal`) and its action ``V -> G H G V``."""
         K = sps.csc_matrix(H + self._lambda(int(scale)) * self.A)

@@ -108,7 +108,8 @@ def _faces(shape) -> list:
     from OCP.TopAbs import TopAbs_FACE
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
-    faces, seen = [], set()
+    faces: list = []                                     # TopoDS_Face
+    seen = set()
     explorer = TopExp_Explorer(shape, TopAbs_FACE)
     while explorer.More():
         face = TopoDS.Face(explorer.Current())

@@ -355,7 +355,9 @@ def read_iges_surfaces(path: str | os.PathLike) -> list[IgesSurface]:
         that needs a CAD kernel (trimmed or analytic), a degenerate surface, bad data.
     """
     f = _IgesFile(path)
-    faces, refused, skipped = [], [], collections.Counter()
+    faces: list[tuple[int | None, int]] = []   # (entity 144 or None, its entity 128)
+    refused: list[str] = []
+    skipped: collections.Counter[int] = collections.Counter()
     wrapped = set()  # entities 128 reached through a 144 or 143
     for de, e in f.entries.items():
         if e.type == 144:

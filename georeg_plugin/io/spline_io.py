@@ -209,8 +209,9 @@ def read_scalar_field(path: str | os.PathLike) -> np.ndarray | None:
 
 def _make_patch(degrees, knots, cp, weights) -> SplinePatch:
     """A SplinePatch; ``weights=None`` is a B-spline patch."""
-    return SplinePatch(degrees=tuple(int(d) for d in degrees),
-                       knots=tuple(np.asarray(k, dtype=float) for k in knots),
+    du, dv = (int(d) for d in degrees)
+    ku, kv = (np.asarray(k, dtype=float) for k in knots)
+    return SplinePatch(degrees=(du, dv), knots=(ku, kv),
                        control_points=np.asarray(cp, dtype=float),
                        weights=None if weights is None else np.asarray(weights, float))
 
@@ -299,7 +300,8 @@ def write_iges(path: str | os.PathLike, patches, names=None, transforms=None) ->
     if not patches or len(names) != len(patches) or len(transforms) != len(patches):
         raise ValueError(f"{path}: {len(patches)} patches, {len(names)} names, "
                          f"{len(transforms)} transforms: need one each, at least one")
-    entities = []  # (type, form, transform DE, label, values, status)
+    # (type, form, transform DE, label, values, status)
+    entities: list[tuple[int, int, int, str, list, str]] = []
     for k, (patch, name, chain) in enumerate(zip(patches, names, transforms)):
         if chain is not None and np.ndim(chain) == 2:
             chain = [chain]
@@ -315,7 +317,8 @@ def write_iges(path: str | os.PathLike, patches, names=None, transforms=None) ->
             entities.append((406, 15, 0, "", [406, 1, _hollerith(str(name))], "00000100"))
         entities.append((128, 0, t_de, (name or "SURFACE")[:8],
                          _entity_128(patch, name_de), "00000000"))
-    d_records, p_lines = [], []
+    d_records: list[str] = []
+    p_lines: list[str] = []
     for k, (etype, form, t_de, label, values, status) in enumerate(entities):
         de = 2 * k + 1
         strings = [v if isinstance(v, str) else str(v) if isinstance(v, int)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
 import scipy.sparse as sps
@@ -123,6 +123,8 @@ class GeometricRegularization:
     space: "MultilevelSpace"
     schedule: Mapping[int, int] | None = None
     hold_unseen: bool = False
+    #: ``C_s^T`` of each level, csr (set by ``__post_init__``)
+    _transposed: tuple = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n_levels = len(self.space.operators)
@@ -189,7 +191,7 @@ class GeometricRegularization:
         """
         return self.factorize(H, scale)(b, q)
 
-    def factorize(self, H, scale: int):
+    def factorize(self, H, scale: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         """The step's map ``(b, q) -> C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21) with
         ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change."""
         s = self.level(scale)
@@ -219,7 +221,8 @@ class GeometricRegularization:
             return CT @ d_s                                            # Eq. 21
         return step
 
-    def step_covariance(self, H, scale: int):
+    def step_covariance(self, H,
+                        scale: int) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
         """Covariance of the step per unit noise, ``C_s^T (C_s H C_s^T)^-1 C_s`` (Eq. 21 applied
         to ``Cov(b) = H``): its diagonal (n_fe,) and its action ``V (n_fe, k) -> C V``."""
         s = self.level(scale)

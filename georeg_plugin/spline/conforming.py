@@ -101,7 +101,7 @@ def _insertions(target: SplinePatch, edges: list, source: SplinePatch, distance_
     ``edges`` runs along an edge of ``target``'s parameter box: a breakpoint of the source's
     edge on the target's edge, with a span next to it on the same edge (its midpoint there).
     A point where the two merely touch (a circle tangent to a square) adds nothing."""
-    new = ([], [])
+    new: tuple[list[float], list[float]] = ([], [])       # knots to insert in u, in v
     lo = np.array([target.knots[0][0], target.knots[1][0]])
     hi = np.array([target.knots[0][-1], target.knots[1][-1]])
     tol = param_rtol * (hi - lo)

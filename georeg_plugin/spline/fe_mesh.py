@@ -58,13 +58,13 @@ def check_element_degree(degrees: tuple[int, int], family: str, what: str = "spl
     if family not in ELEMENT_DEGREES:
         raise ValueError(f"family must be one of {sorted(ELEMENT_DEGREES)}, got {family!r}")
     element_degree = ELEMENT_DEGREES[family]
-    degrees = tuple(int(p) for p in degrees)
+    spline_degrees = tuple(int(p) for p in degrees)
     triangle = family.startswith("T")
-    needed = sum(degrees) if triangle else max(degrees)
+    needed = sum(spline_degrees) if triangle else max(spline_degrees)
     if needed > element_degree:
         kind = "total degree" if triangle else "degree"
         raise ElementDegreeError(
-            f"{what}: degree {degrees} is higher than the degree {element_degree} of {family} "
+            f"{what}: degree {spline_degrees} is higher than the degree {element_degree} of {family} "
             f"elements: a {family} mesh cannot reproduce the spline (Eq. 16 needs spline "
             f"{kind} <= element degree, i.e. <= {element_degree} for {family}); use "
             f"{'Q9 elements or ' if family != 'Q9' else ''}a spline of lower degree, or a "

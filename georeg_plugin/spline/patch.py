@@ -157,7 +157,7 @@ class SplinePatch:
                           derivative) -> tuple[np.ndarray, np.ndarray]:
         du, dv = _DERIVATIVES[derivative]
         cols, N = self._compact(uv, 0, 0)
-        if not self.is_rational:
+        if self.weights is None:                        # a B-spline
             return (cols, N) if derivative is None else (cols, self._compact(uv, du, dv)[1])
         w = self.weights.ravel()[cols]
         W = np.sum(w * N, axis=1, keepdims=True)       # W = sum_k w_k N_k (Eq. 12)

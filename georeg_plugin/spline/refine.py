@@ -58,7 +58,7 @@ def insert_knots(patch: SplinePatch, new_u=(), new_v=()) -> tuple[SplinePatch, s
     C = sp.kron(Cu, Cv, format="csr")                       # N_c = C N_f (Eq. 13)
     shape_f = (Cu.shape[1], Cv.shape[1])
     xc = patch.control_points.reshape(-1, 3)
-    if not patch.is_rational:
+    if patch.weights is None:                                # a B-spline
         xf = C.T @ xc                                        # Eq. 15
         fine = SplinePatch(patch.degrees, (tu_f, tv_f), xf.reshape(shape_f + (3,)))
         return fine, C

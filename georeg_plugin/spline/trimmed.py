@@ -62,7 +62,8 @@ def _footprints_inside(uv: np.ndarray, connectivity: np.ndarray, loops) -> np.nd
     points = uv[connectivity]                                     # (ne, nn, 2)
     centre = points.mean(axis=1, keepdims=True)
     shrunk = points + FOOTPRINT_SHRINK * (centre - points)
-    return inside_loops(shrunk.reshape(-1, 2), loops).reshape(connectivity.shape).all(axis=1)
+    inside = inside_loops(shrunk.reshape(-1, 2), loops).reshape(connectivity.shape)
+    return np.asarray(inside.all(axis=1))                 # (numpy types all(axis) as maybe a scalar)
 
 
 def trim_mesh(mesh: SplineFEMesh, loops: Sequence, where: str = "face") -> SplineFEMesh:

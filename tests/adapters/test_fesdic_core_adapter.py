@@ -2,6 +2,7 @@
 legacy meshes of every family go through point inversion and the georeg solver."""
 import numpy as np
 import pytest
+import scipy.sparse as sps
 from numpy.testing import assert_allclose
 
 from adapters.fesdic_core import georeg_solver, nominal_model
@@ -140,3 +141,23 @@ def test_the_formulation_follows_the_nominal_flat_scalar_curved_vector():
     moved = spline.evaluate(dome.uv) - space.patch(1).evaluate(dome.uv)
     assert_allclose(np.einsum("kd,kd->k", moved, n), q, atol=1e-12)
     assert values.shape == (space.patch(1).n_dofs,)
+
+
+def test_the_plugin_solver_is_recognised_by_the_core_hooks_it_implements():
+    """The plugin imports nothing of the core: its solver meets the core's hook protocols by
+    its methods alone (factorize, step_covariance, bias_step; no start_scale), and the core's
+    uncertainty gets its step covariance through the protocol."""
+    from fesdic_core.shape.uncertainty import shape_std
+    from fesdic_core.solve import (BiasStepHook, FactorizeHook, StartScaleHook, StepCovarianceHook,
+                                   StepSolver)
+    model = nominal_model(rectangle(L, W), 4, "Q9")
+    solver = georeg_solver(model, 2)
+    assert isinstance(solver, GeometricRegularization)
+    for hook, has in [(StepSolver, True), (FactorizeHook, True), (StepCovarianceHook, True),
+                      (BiasStepHook, True), (StartScaleHook, False)]:
+        assert isinstance(solver, hook) is has, hook.__name__
+    H = sps.identity(model.mesh.n_nodes, format="csr")
+    std = shape_std(H, 1.0, solver, scale=0)
+    C = solver.operator(solver.level(0)).toarray()
+    expected = np.sqrt(np.diag(C.T @ np.linalg.inv(C @ C.T) @ C))   # C^T (C H C^T)^-1 C, H = I
+    assert_allclose(std, expected, rtol=1e-10)

@@ -110,6 +110,7 @@ def read_opencv_stereo(path: str | os.PathLike, image_size=None) -> tuple[Camera
         _, width = get(["image_width"], "image width", required=False)
         _, height = get(["image_height"], "image height", required=False)
         key, both = get(["imageSize", "image_size"], "image size", required=False)
+        file_sizes: list[tuple[int, int]] | None
         if both is not None:
             file_sizes = [as_size(both, path, key)] * 2
         elif width is not None or height is not None:

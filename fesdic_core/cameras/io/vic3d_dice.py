@@ -165,7 +165,8 @@ _DICE_OTHER = {"VIC3D_LENS_DISTORTION", "VIC3D_DIS", "K1R1_K2R2_K3R3", "K1R2_K2R
 _DICE_COEFFS = ("K1", "K2", "K3", "K4", "K5", "K6", "P1", "P2", "S1", "S2", "S3", "S4", "T1", "T2")
 
 
-def _dice_params(plist: ET.Element) -> tuple[dict[str, str], dict[str, ET.Element]]:
+def _dice_params(plist: ET.Element) -> tuple[dict[str | None, str | None],
+                                              dict[str | None, ET.Element]]:
     params = {p.get("name"): p.get("value") for p in plist.findall("Parameter")}
     sublists = {p.get("name"): p for p in plist.findall("ParameterList")}
     return params, sublists

@@ -334,3 +334,14 @@ def test_the_per_block_normalisation_is_the_per_element_one(scene, monkeypatch):
             expected = (values - mean[quad.element]) / sd[quad.element] - expected
         np.testing.assert_allclose(res.r[c], np.where(m, -expected, 0.0), rtol=0, atol=1e-9)
         np.testing.assert_allclose(res.sigma_ref[c], scales[0], rtol=1e-12)
+
+
+def test_displacement_operators_refuse_a_residual_without_its_derivative():
+    """The Gauss-Newton operators need dr/du: a residual computed without it is refused by
+    name (before the quadrature is read)."""
+    from fesdic_core.displacement.residual import DisplacementResidual
+    res = DisplacementResidual(r=np.zeros((2, 3)), mask=np.ones((2, 3), bool), dr_du=None,
+                               sigma_ref=np.ones((2, 3)), dynamic_range=np.ones(2),
+                               std_percent=0.0)
+    with pytest.raises(ValueError, match="no dr/du"):
+        displacement_operators(None, res)

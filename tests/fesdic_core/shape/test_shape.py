@@ -146,3 +146,14 @@ def test_a_stagnant_step_is_neither_taken_nor_evaluated(twisted_scene):
     assert log.records == []                        # no step taken
     np.testing.assert_array_equal(again.q, first.q)
     assert again.residual.std_percent == first.residual.std_percent   # the start's, not re-evaluated
+
+
+def test_shape_operators_refuse_a_residual_without_its_derivative():
+    """Eq. 8 needs dr/dX: a residual computed without it is refused by name (before the
+    quadrature is read)."""
+    from fesdic_core.residual.graylevel import GrayLevelResidual
+    from fesdic_core.shape.operators import shape_operators
+    res = GrayLevelResidual(r=np.zeros(3), mask=np.ones(3, bool), dr_dX=None, dr_dp=None,
+                            sigma0=np.ones(3), dynamic_range=1.0, std_percent=0.0)
+    with pytest.raises(ValueError, match="no dr/dX"):
+        shape_operators(None, np.zeros((4, 3)), res)

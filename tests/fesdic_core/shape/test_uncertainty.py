@@ -109,3 +109,11 @@ def test_tikhonov_step_covariance_with_the_gauge_projection():
     W = np.diag(w)
     P = np.eye(n) - keep @ np.linalg.solve(keep.T @ W @ keep, keep.T @ W)
     np.testing.assert_allclose(std, np.sqrt(np.diag(P @ C @ P.T)), rtol=1e-8)
+
+
+def test_shape_std_refuses_rigid_modes_without_their_weights():
+    """The modes are projected out in the nodal weights' metric: modes alone are refused
+    (a ValueError naming them, not numpy's TypeError on None)."""
+    H = sps.identity(4, format="csr") * 2.0
+    with pytest.raises(ValueError, match="rigid normal modes .* nodal weights"):
+        shape_std(H, 1.0, DirectSolver(), modes=np.ones((4, 1)))
