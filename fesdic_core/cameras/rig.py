@@ -74,7 +74,7 @@ def place_camera1(cam0: Camera, cam1: Camera, R: np.ndarray, t: np.ndarray) -> C
     return cam1.with_extrinsics(np.concatenate([out[0].ravel(), out[1].ravel()]))
 
 
-apply_stereo = place_camera1          # name used in docs/interfaces.md
+apply_stereo = place_camera1          # the name of release 0.1, kept for one release
 
 
 def stereo_extrinsic_jacobian(cam0: Camera, R: np.ndarray, t: np.ndarray) -> np.ndarray:

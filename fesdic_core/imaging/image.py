@@ -12,10 +12,10 @@ coefficients ``c`` computed once by :func:`scipy.ndimage.spline_filter` (mode "m
 the image is continued symmetrically about its first and last pixel centres, and so are
 the coefficients). The prefilter lowers the sub-pixel bias of the interpolant and the
 bias that the noise of the interpolated image adds (``benchmarks/bench_interpolation_bias.py``).
-End to end on stereo shapes (``benchmarks/bench_image_model.py``, README "Interpolation
-bias") it lowers the error where the sensor noise matters, but an image-space blur is a
-different blur on the specimen in the two views and it mixes the background into the
-texture along the specimen's edges: both grow with sigma. :data:`DEFAULT_PREFILTER_PX` is
+End to end on stereo shapes (``benchmarks/bench_image_model.py``,
+docs/validation/interpolation_bias.md) it lowers the error where the sensor noise matters,
+but an image-space blur is a different blur on the specimen in the two views and it mixes
+the background into the texture along the specimen's edges: both grow with sigma. :data:`DEFAULT_PREFILTER_PX` is
 the sigma with the lowest total error there. Both images of a pair must use the same
 model (the residual compares them).
 
@@ -42,13 +42,13 @@ mirror boundary), whose value and gradient are one 6x6 sum, compiled in
 ``fesdic_core.imaging._bspline.evaluate5`` (numpy twin in :mod:`fesdic_core.imaging.bspline5`; 2-3x the cubic's time).
 Its sub-pixel bias is lower (``benchmarks/bench_interpolation_bias.py``), but end to end
 it changes the shape errors by a few percent at most (``bench_image_model.py --orders 3 5``,
-README "Interpolation bias"); its support is one pixel wider on each side, so
+docs/validation/interpolation_bias.md); its support is one pixel wider on each side, so
 :meth:`Image.inside` keeps points 2.5 px inside the border instead of 1.5.
 
 The multiscale images of Remark 3 (:meth:`Image.coarsen`) are 2x2 block means of the RAW
 values, modelled with the same ``prefilter_px`` in coarse pixels (a coarse image is the
 picture a camera of half the resolution would take, so it gets the same model; measured
-in README "Interpolation bias"); the matching camera is
+in docs/validation/interpolation_bias.md); the matching camera is
 :meth:`fesdic_core.cameras.camera.Camera.scaled`.
 """
 from __future__ import annotations
@@ -76,7 +76,7 @@ __all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL", "D
 COMPILED_KERNEL = _bspline is not None
 
 #: default standard deviation (px) of the Gaussian prefilter of the image model
-#: (measured choice: benchmarks/bench_image_model.py, README "Interpolation bias")
+#: (measured choice: benchmarks/bench_image_model.py, docs/validation/interpolation_bias.md)
 DEFAULT_PREFILTER_PX = 0.5
 
 #: the B-spline orders of the image model: 3 (cubic, 4x4 support) or 5 (quintic, 6x6)

@@ -62,7 +62,7 @@ DEFAULT_MAX_VIEW_ANGLE_DEG = 70.0
 #: mesh's triangles (see the module docstring)
 TOLERANCE_FRACTION = 0.25
 #: default margin (px of the current scale) around an occluder's image: the measured choice
-#: of README, "Visibility" (a bar in front of a plate: 1 px brings FE back to its error
+#: of docs/validation/visibility.md (a bar in front of a plate: 1 px brings FE back to its error
 #: without the bar; 0 px leaves 2.4 times that error, 2 px takes data from the nodes)
 DEFAULT_MARGIN_PX = 1.0
 #: barycentric slack: a ray through the shared edge of two occluders is caught by both
@@ -92,7 +92,7 @@ class VisibilitySettings:
         the mesh's triangles are ignored (the point's own element).
     margin_px : a point whose ray passes within this many pixels (of the camera given, i.e.
         of the current image scale) of an occluder in front of it is hidden too: the image
-        model spreads an occluding edge over about a pixel (see README, "Visibility").
+        model spreads an occluding edge over about a pixel (docs/validation/visibility.md).
     engine : "numpy", "embree" (needs ``trimesh`` and ``embreex``; exact triangles, so only
         with ``margin_px = 0``) or "auto" (embree when installed and the margin is 0).
     """

@@ -165,7 +165,8 @@ def multiscale_claim(run) -> Claim:
 
 
 def check_claims(run) -> tuple[Claim, ...]:
-    """The two claims of issue 4 on ``run`` (``passed`` None where a claim does not apply)."""
+    """The two claims of the demo (README, "Headline results") on ``run`` (``passed`` None
+    where a claim does not apply)."""
     claims = (shape_claim(run), multiscale_claim(run))
     for c in claims:
         logger.log(logging.DEBUG if c.passed is None else logging.INFO,

@@ -219,7 +219,7 @@ def _levels_chosen(result) -> dict | None:
 
 
 def summary_dict(run) -> dict:
-    """The ``summary.json`` document (issue 4; extend, do not change).
+    """The ``summary.json`` document (extend it, do not change it: readers depend on its keys).
 
     ``{"truth_available": bool, "failed_methods": [label], "methods": [{"name", "param",
     "shape_rms_error_mm", "distance_to_bfp_rms_mm", "residual_percent", "iterations",

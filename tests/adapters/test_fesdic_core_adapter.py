@@ -68,6 +68,7 @@ def test_accepted_pairs_give_exact_nonsingular_levels(family, degree):
 
 # --- legacy meshes (a mesher's nodes, read with mesh_io) regularized by point inversion ----
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family,nx,ny", [("T3", 12, 8), ("Q4", 12, 8), ("T6", 6, 4)])
 def test_legacy_mesh_measures_through_point_inversion_and_the_georeg_solver(
         twisted_scene, tmp_path, family, nx, ny):

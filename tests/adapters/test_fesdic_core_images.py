@@ -16,6 +16,7 @@ from georeg_plugin.spline.geometries import plate_with_hole, rectangle
 from shape_truth import bounded_shape_error, rms
 
 
+@pytest.mark.slow
 def test_nurbs_plate_with_hole_measures_the_twisted_open_hole_plate(small_demo_scene):
     """plate_with_hole (100 x 50 mm, r = 14 mm), 256 Q9 elements, 3 spline levels on image
     scales (2, 1, 0): RMS error to the true surface < 5 um (0.5 % of the 1 mm twist, 0.02 px)
@@ -36,6 +37,7 @@ def test_nurbs_plate_with_hole_measures_the_twisted_open_hole_plate(small_demo_s
     assert abs(bounded_shape_error(geo.nodes, scene.specimen)).max() < 0.025
 
 
+@pytest.mark.slow
 def test_georeg_with_fixed_coarse_levels_is_worse_than_fe_on_a_short_feature(bump_scene):
     """The bias that the level search removes: with 2 FIXED spline levels of the plate
     (finest knot spans 30 x 20 mm) a 0.3 mm bump of sigma 2 mm is not in the spline space;
@@ -53,6 +55,7 @@ def test_georeg_with_fixed_coarse_levels_is_worse_than_fe_on_a_short_feature(bum
     assert geo.ok
 
 
+@pytest.mark.slow
 def test_automatic_level_is_not_worse_than_fe_on_a_short_feature(bump_scene):
     """The same start (2 levels), then the level search: it climbs the ladder to the
     spline of the FE mesh (26 x 18 = 468 dofs) and beats FE. Measured: 7.3 um, FE 11.1 um."""

@@ -109,6 +109,7 @@ def test_spline_for_mesh_covers_the_mesh():
         adapter.spline_for_mesh(Nodes, margin=-1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("typel", [3, 10])
 def test_spline_regularization_beats_plain_pyxel_on_noisy_images(speckle_pair, typel):
     f, g = speckle_pair

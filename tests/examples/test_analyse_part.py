@@ -120,6 +120,7 @@ def test_part_vtu_gives_the_exact_dimensions(tmp_path, capsys):
     assert "block height above the plate ring" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_report_folder_holds_the_figures_and_the_targets(tmp_path, capsys):
     """--out: summary.json (the same figures as --json), the PNGs and report.html; the targets
     printed. The exact block is 6.30 mm high: 0.06 mm off the laser's 6.36 mm, a FAIL."""

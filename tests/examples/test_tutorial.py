@@ -37,6 +37,7 @@ IDENTITIES = {  # name -> bound, as stated in the tutorial (<= unless said other
 LOWER_BOUNDS = {"H_s_positive": 0.0, "minimum_over_splines": 0.0}
 
 
+@pytest.mark.slow
 def test_every_identity_of_the_tutorial_holds(run):
     result, _ = run
     assert result["failed"] == []

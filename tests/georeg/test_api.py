@@ -83,6 +83,7 @@ def _assert_same(a, b, where="summary"):
         assert a == b, (where, a, b)
 
 
+@pytest.mark.slow
 def test_save_writes_the_files_of_georeg_measure(api_run, cli_out, tmp_path):
     assert api_run.ok and api_run.failure is None
     out = tmp_path / "api_out"
@@ -94,6 +95,7 @@ def test_save_writes_the_files_of_georeg_measure(api_run, cli_out, tmp_path):
     _assert_same(_without_timings(saved), _without_timings(json.loads(json.dumps(api_run.summary))))
 
 
+@pytest.mark.slow
 def test_save_refuses_a_non_empty_folder_unless_overwrite(api_run, tmp_path):
     (tmp_path / "old.txt").write_text("x")
     with pytest.raises(FileExistsError, match="not empty.*overwrite=True"):
@@ -103,6 +105,7 @@ def test_save_refuses_a_non_empty_folder_unless_overwrite(api_run, tmp_path):
     assert not (tmp_path / "old.txt").exists() and (tmp_path / "summary.json").is_file()
 
 
+@pytest.mark.slow
 def test_toml_file_gives_the_same_measurement(user_folder, api_run):
     run = georeg.measure(user_folder / "config.toml")
     np.testing.assert_allclose(run.nodes, api_run.nodes, rtol=0, atol=1e-9)
@@ -127,6 +130,7 @@ def test_to_meshio_round_trips_the_command_line_vtu(api_run, cli_out, tmp_path):
     np.testing.assert_array_equal(back.cells[0].data, mesh.cells[0].data)
 
 
+@pytest.mark.slow
 def test_progress_callback_hears_every_scale(user_folder):
     calls = []
     run = georeg.measure(user_folder / "config.toml", progress=lambda *a: calls.append(a))

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 from test_end_to_end import CONFIG, RECTANGLE, case  # noqa: F401  (case: the module fixture)
 
 from fesdic_core.cameras.io.formats import read_opencv_stereo
@@ -34,6 +35,7 @@ def _opencv_file(path, cameras):
     fs.release()
 
 
+@pytest.mark.slow
 def test_measure_with_opencv_calibration_writes_the_posed_rig(case, tmp_path):  # noqa: F811
     folder, _, cameras, _ = case
     _opencv_file(tmp_path / "stereo.yml", cameras)

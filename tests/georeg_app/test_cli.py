@@ -62,6 +62,7 @@ def test_missing_config_file(tmp_path, capsys):
     assert "none.toml: configuration file not found" in _one_error_line(capsys.readouterr().err)
 
 
+@pytest.mark.slow
 def test_subprocess_exit_status_and_verbose_traceback(tmp_path):
     config = _config(tmp_path, levels="0")
     out = tmp_path / "out"

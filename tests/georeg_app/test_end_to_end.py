@@ -59,6 +59,7 @@ def _fails_naming(capsys, config, out, *names):
     return err[0]
 
 
+@pytest.mark.slow
 def test_measure_writes_a_shape_that_matches_the_truth(case, tmp_path, capsys):
     folder, specimen, _, _ = case
     out = tmp_path / "out"
@@ -133,6 +134,7 @@ def test_mesh_outside_the_images_is_named(case, tmp_path, capsys):
                   "outside", "cam0")
 
 
+@pytest.mark.slow
 def test_swapped_images_fail_the_measurement_and_write_nothing(case, tmp_path, capsys):
     """cam0 <-> cam1 swapped: the run ends, but its residual is many times what the images'
     noise explains; `measure` exits 1 with one line saying so and publishes nothing."""
@@ -153,6 +155,7 @@ def test_pure_noise_images_are_refused(case, tmp_path, capsys):
                   "noise0.png", "no texture")
 
 
+@pytest.mark.slow
 def test_a_non_empty_output_folder_is_refused_before_computing(case, tmp_path, capsys):
     folder = case[0]
     out = tmp_path / "out"

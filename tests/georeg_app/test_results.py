@@ -18,6 +18,7 @@ def test_the_chosen_method_is_the_first_of_measure_and_the_first_georeg_of_compa
         ShapeRun(run, "track")
 
 
+@pytest.mark.slow
 def test_a_failed_method_fails_measure_and_is_delivered_by_compare(tmp_path):
     run = fake_run(failed={"georeg (multiscale)": "best"})
     failed = ShapeRun(run, "measure", method="georeg (multiscale)")

@@ -71,6 +71,7 @@ def test_zero_displacement_on_identical_images(scene):
     assert m.residual_percent < 1e-9
 
 
+@pytest.mark.slow
 def test_rigid_translation_and_rotation(scene):
     """0.3 / -0.2 / 0.1 mm and rotations of 3 and 2 mrad (up to 0.07 mm more at the mesh's
     corners) from rest: RMS error below 1.5 um in plane, 6 um out of plane."""
@@ -81,6 +82,7 @@ def test_rigid_translation_and_rotation(scene):
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"RMS error {1e3 * rms} um"
 
 
+@pytest.mark.slow
 def test_in_plane_stretch_and_its_strain(scene):
     """A 0.5 % stretch along x (up to 0.11 mm at the mesh's ends): displacement RMS error
     below 1.5 um in plane, Green-Lagrange E_xx = 0.005 + 0.005**2 / 2 to 150 microstrain RMS
@@ -97,6 +99,7 @@ def test_in_plane_stretch_and_its_strain(scene):
     assert abs(strain[:, 0].mean() - truth[0]) < 100e-6
 
 
+@pytest.mark.slow
 def test_out_of_plane_bending(scene):
     """A parabolic deflection (0.27 mm at the mesh's ends) on Q9 elements, which hold it
     exactly: RMS error below 3 um in plane, 10 um out of plane."""
@@ -182,6 +185,7 @@ class _ConstantPerComponent:
         return self.C.T @ sparse_solve(self.C @ H @ self.C.T, self.C @ b)
 
 
+@pytest.mark.slow
 def test_a_componentwise_operator_restricts_each_component(scene):
     """kron(C, I3) on the node-major dofs: with C the constant, the field is one translation,
     found to 1 um in plane and 3 um out of plane from a pure translation."""

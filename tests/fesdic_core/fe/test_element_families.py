@@ -30,6 +30,7 @@ TRANSLATION = np.array([0.6, -0.48, 0.64])                                # 1 mm
 @pytest.mark.parametrize("family,nx,ny,calibrate", [
     ("T3", 12, 8, False), ("Q9", 6, 4, False), ("Q9", 6, 4, True),
     ("T6", 6, 4, False), ("T6", 6, 4, True)])
+@pytest.mark.slow
 def test_every_family_measures_the_twisted_plate(twisted_scene, family, nx, ny, calibrate):
     specimen, cameras, images = twisted_scene
     mesh = rectangle_mesh(60.0, 40.0, nx, ny, family=family)

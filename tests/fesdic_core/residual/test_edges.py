@@ -72,6 +72,7 @@ def test_margin_leaves_out_the_band_and_keeps_small_elements_whole():
     assert np.all(quad.element_sum(wide.astype(float)) > 0)
 
 
+@pytest.mark.slow
 def test_margin_lowers_the_error_of_the_boundary_nodes_on_a_noise_free_flat_plate():
     """FE, exact cameras, a noise-free 40 x 30 mm flat plate seen by the demo's rig (320 x
     240 px, 4 px speckle): the band along the plate's edges drags the boundary nodes; the

@@ -204,6 +204,7 @@ def _with_bar(scene, bar=BAR) -> tuple:
     return tuple(out)
 
 
+@pytest.mark.slow
 def test_masking_an_occluder_measures_the_plate_better(bump_scene, plate_mesh):
     """With the bar painted in, the points it hides are fitted to the bar's pattern unless the
     bar is given as an extra occluder. Error (RMS distance to the true surface after a bounded
@@ -224,6 +225,7 @@ def test_masking_an_occluder_measures_the_plate_better(bump_scene, plate_mesh):
     assert err["seeing"] < 1.25 * err["clean"], err
 
 
+@pytest.mark.slow
 def test_nodes_that_no_point_sees_stop_fe_and_are_held_by_regularization(bump_scene, plate_mesh):
     """A bar 6 mm wide hides strips wider than an element: FE stops on the solver's error
     naming the unseen nodes; Tikhonov (5 mm) with the mask is trusted and within 2.5 times its

@@ -48,6 +48,7 @@ def _start_is_far(start, cameras, mesh):
     assert shift > 5.0                                # several speckles away (px)
 
 
+@pytest.mark.slow
 def test_fixed_point_recovers_perturbed_poses_with_the_stereo_relation(twisted_scene):
     """6 unknowns (stereo relation kept): poses to < 0.05 px, shape to < 2% of 0.5 mm."""
     specimen, cameras, images = twisted_scene
@@ -106,6 +107,7 @@ def test_a_solver_that_cannot_lower_the_residual_gives_a_failed_measurement(twis
     assert m.residual_percent > 3.0 * m.noise_percent
 
 
+@pytest.mark.slow
 def test_a_good_measurement_is_consistent_with_the_noise(twisted_scene):
     """At the true cameras the residual sits below the noise floor the images give.
 
@@ -125,6 +127,7 @@ def test_a_good_measurement_is_consistent_with_the_noise(twisted_scene):
                                                                        whole.residual_percent)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["noise", "swapped", "rotated"])
 def test_nonsense_inputs_fail_loudly(twisted_scene, case):
     """Images of pure noise, the two cameras swapped, one camera 10 degrees off: the

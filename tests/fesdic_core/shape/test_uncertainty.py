@@ -66,6 +66,7 @@ def noisy_bump_pairs():
     return cameras, clean
 
 
+@pytest.mark.slow
 def test_predicted_std_matches_the_spread_over_noise_draws(noisy_bump_pairs):
     """FE on a 12 x 8 Q9 mesh 2 mm inside the plate's edges, 8 draws of 2 gray levels of
     noise: the median over the nodes of predicted / empirical std lies in [0.8, 1.3] (the

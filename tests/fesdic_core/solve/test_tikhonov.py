@@ -305,6 +305,7 @@ def test_covariance_diagonal_is_diag_of_G_H_G(path, monkeypatch):
                                rtol=1e-8)
 
 
+@pytest.mark.slow
 def test_covariance_diagonal_matches_monte_carlo_of_the_step():
     """b ~ N(0, kappa H) (b = Phi^T noise): the variance of each dof of the step over 3000
     draws is kappa * covariance_diagonal within its sampling error (2.6 % rms)."""

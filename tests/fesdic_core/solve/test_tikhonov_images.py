@@ -41,6 +41,7 @@ def _peak(bump_scene, m, mesh):
     return float(m.nodes[i, 2] - np.median(m.nodes[:, 2]))
 
 
+@pytest.mark.slow
 def test_tikhonov_on_images_measures_the_bump_plate_better_than_fe(bump_scene, measured, mesh):
     """Tikhonov 5 mm, through driver.measure on the rendered pair: RMS error < 3 % of the bump
     (9 um) and below the unregularized FE's (whose noise it filters). The nominal flat plate
@@ -86,6 +87,7 @@ def _kappa(m):
     return float(np.sum(w * w * r * r) / np.sum(w))
 
 
+@pytest.mark.slow
 def test_automatic_length_on_images_is_as_good_as_the_best_fixed_one(bump_scene, measured, mesh):
     """length_mm="auto" with the noise of the FE fit's residual: the Cp choice measures the
     bump as well as the better fixed length (5 mm, error within 1.3 x) and better than FE and
@@ -115,6 +117,7 @@ class _Spy(TikhonovSolver):
         return d
 
 
+@pytest.mark.slow
 def test_multiscale_weight_is_fixed_per_scale_and_weakens_on_finer_images(bump_scene, mesh):
     """Through driver.measure with scales (1, 0) and a 5 mm length: every step of a scale
     uses that scale's weight, the cosine-probe weight of 10 mm (scale 1) and 5 mm (scale 0)

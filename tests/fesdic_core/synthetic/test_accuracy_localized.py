@@ -4,6 +4,7 @@ The accuracy of every synthetic test rests on this function: it must not report 
 as exact when the truth has a bump.
 """
 import numpy as np
+import pytest
 
 from fesdic_core.synthetic.accuracy import shape_error_to_surface
 from scenes import bump_specimen
@@ -24,6 +25,7 @@ def test_bounded_alignment_sees_the_bump():
     assert 0.9 * raw < rms(bounded_shape_error(flat, specimen)) <= raw
 
 
+@pytest.mark.slow
 def test_shape_error_to_surface_does_not_dodge_a_localized_feature():
     specimen, flat = bump_specimen(), _flat_grid()
     raw = rms(specimen.height(flat[:, 0], flat[:, 1]))

@@ -145,6 +145,7 @@ def test_determinism_and_noise_level():
         assert abs(img.mean() - 100.0) < 0.1
 
 
+@pytest.mark.slow
 def test_gray_level_conservation_between_the_views():
     """Eq. 3: f0(P_0(X)) = f1(P_1(X)) on the true surface, not 0.3 mm off it."""
     cams = demo_cameras((400, 300), distance_mm=300.0, field_mm=40.0, dist=DIST)

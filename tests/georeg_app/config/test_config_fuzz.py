@@ -270,6 +270,7 @@ def test_the_valid_documents_load(tmp_path, schema):
     assert len(config.cameras.landmarks) == (4 if "landmarks" in schema.doc else 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("schema", [GEOREG_JSON_CAMERAS, GEOREG_PYVALE], ids=["json", "pyvale"])
 @FUZZ
 @given(data=st.data())
@@ -348,6 +349,7 @@ def test_the_valid_example_documents_load(tmp_path):
     assert challenge_config.ConfigError is ConfigError          # one validation machinery
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=broken(ANALYSIS))
 def test_broken_example_analysis_file_is_one_config_error(tmp_path, doc):

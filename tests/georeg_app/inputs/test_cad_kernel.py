@@ -178,6 +178,7 @@ def test_a_file_without_faces_is_named(tmp_path):
         read_cad_faces(path)
 
 
+@pytest.mark.slow
 def test_the_whole_cylinder_is_one_part_with_trimmed_discs_and_glued_levels():
     """Three faces, one mesh: each face refined for elements of about one size (by its
     area), the discs (trimmed) keep their elements inside the rim, not welded to the lateral

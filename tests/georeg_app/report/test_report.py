@@ -72,6 +72,7 @@ def test_report_is_self_contained_and_shows_fail():
     assert [base64.b64decode(e) for e in embedded] == [png]
 
 
+@pytest.mark.slow
 def test_figures_are_png_and_named():
     run = fake_run()
     out = figures.make_figures(run)
@@ -159,6 +160,7 @@ def test_errors_in_micrometres():
     assert "georeg 10 µm" in page and "FE 50 µm" in page                 # the claim's numbers
 
 
+@pytest.mark.slow
 def test_error_maps_only_with_the_truth():
     assert figures.error_maps(fake_run(node_errors=True)).startswith(PNG)
     assert figures.error_maps(fake_run(truth=False, node_errors=True)) is None

@@ -120,6 +120,7 @@ def test_part_component_levels_are_glued_nested_and_hold_the_part_s_affine_field
     assert_nested(space)
 
 
+@pytest.mark.slow
 def test_a_lone_face_may_take_the_scalar_space_and_the_part_stays_nested_and_rigid():
     """The folded plate (two glued faces: vector) and a cylinder panel apart from it (no
     shared control point: `isolated_faces`) in one part; with `scalar` the panel gets its

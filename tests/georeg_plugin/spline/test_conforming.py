@@ -97,6 +97,7 @@ def test_a_circle_touching_a_square_adds_no_knot():
 
 
 
+@pytest.mark.slow
 def test_the_split_keeps_the_neighbour_s_continuity_in_the_target_s_degree():
     """A bicubic A against the biquadratic B and C: where they meet (x = 25, C0 between B and
     C) A gets a triple knot, C0 in degree 3; its surface unchanged; the FE mesh conforms."""
