@@ -26,7 +26,9 @@ A complete example (every key; optional keys show their default in parentheses):
     # cam1_px = [640.1, 1032.5]      # where camera 1 sees it
 
     [geometry]                    # required: the nominal surface
-    kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh" | "cad"
+    kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh" | "cad" | "roi"
+                                  # ("roi": polygon_px, exclude_px, mask, surface: see
+                                  # georeg_app.config.roi; no landmarks needed)
     length_mm = 100.0             # along x; rectangle and plate_with_hole
     width_mm = 50.0               # along y; rectangle and plate_with_hole
     hole_radius_mm = 14.0         # plate_with_hole only (0 < r < width/2)
@@ -85,6 +87,7 @@ from fesdic_core.imaging.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDER
 from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.residual.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG
 
+from georeg_app.config.roi import RoiConfig, take_roi
 from georeg_app.config.toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean,
                                            check, existing_file, integer, load_toml, number,
                                            resolve_path, show, string, vector)
@@ -112,7 +115,7 @@ def lengths_or_auto(value: Any) -> tuple:
     if not values:
         raise ValueError
     return tuple(v if v == AUTO else number(v) for v in values)
-GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh", "cad")
+GEOMETRY_KINDS = ("rectangle", "plate_with_hole", "mesh", "cad", "roi")
 NORMALISATIONS = ("element", "global", "none")
 DEFAULT_TIKHONOV_LENGTHS_MM = (5.0, 10.0, 20.0, "auto")
 DEFAULT_OUTPUT_DIR = "georeg_out"
@@ -165,6 +168,7 @@ class GeometryConfig:
     file: Path | None = None
     elements: int | None = None
     faces: tuple | None = None
+    roi: RoiConfig | None = None
 
 
 @dataclass(frozen=True)
@@ -239,7 +243,8 @@ def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
     return tuple(out)
 
 
-def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
+def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path,
+             roi: bool = False) -> CamerasConfig:
     t = Table(data, "[cameras]", source)
     paths = {key: t.take(key, string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
@@ -253,7 +258,10 @@ def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> Cameras
     raw = nested if nested is not None else top_landmarks
     where = "[[cameras.landmarks]]" if nested is not None else "[[landmarks]]"
     landmarks = _landmarks(raw, where, source) if raw is not None else ()
-    if given[0] != "file" and len(landmarks) < 4:
+    if roi and landmarks:
+        raise t.error("landmarks", 'not used with [geometry] kind = "roi" (the rig\'s '
+                                   "triangulation places the specimen); remove them")
+    if given[0] != "file" and len(landmarks) < 4 and not roi:
         raise t.error(given[0], f"needs at least 4 [[landmarks]] to place the specimen, "
                                 f"got {len(landmarks)}")
     return CamerasConfig(landmarks=landmarks,
@@ -262,7 +270,7 @@ def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> Cameras
 
 _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
                   "plate_with_hole": {"length_mm", "width_mm", "hole_radius_mm"},
-                  "mesh": {"file"}, "cad": {"file"}}
+                  "mesh": {"file"}, "cad": {"file"}, "roi": set()}
 
 
 def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
@@ -278,6 +286,7 @@ def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
               "file": t.take("file", string, "a file path (string)")}
     elements = t.take("elements", integer, "an integer")
     faces = t.take("faces", _face_list, "a list of face indices (integers) or names (strings)")
+    roi = take_roi(t, kind, base)
     t.finish()
     if faces is not None and kind != "cad":
         raise t.error("faces", f"not used with kind = {json.dumps(kind)}; remove it")
@@ -304,7 +313,7 @@ def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
                 cad_faces(path, selection)        # the file reads, the faces exist
             except ValueError as err:
                 raise t.error(key, str(err)) from None
-    return GeometryConfig(kind, length, width, radius, path, elements, faces)
+    return GeometryConfig(kind, length, width, radius, path, elements, faces, roi)
 
 
 def _face_list(value: Any) -> tuple:
@@ -384,7 +393,8 @@ def load_config(path: str | os.PathLike) -> Config:
     output = top.take("output", lambda v: v, "a table", default={})
     top.finish()
     config = Config(images=_images(images, source, base),
-                    cameras=_cameras(cameras, landmarks, source, base),
+                    cameras=_cameras(cameras, landmarks, source, base,
+                                     roi=isinstance(geometry, dict) and geometry.get("kind") == "roi"),
                     geometry=_geometry(geometry, source, base),
                     method=_method(method, source),
                     output=_output(output, source, base),

@@ -231,7 +231,9 @@ def load_track_config(path: str | os.PathLike) -> TrackConfig:
             if value is None:
                 raise top.error(key, "missing required section (or give [reference] dir = a "
                                      "`georeg measure` output folder)")
-        cams, geom, ref = _cameras(cameras, landmarks, source, base), _geometry(geometry, source, base), None
+        roi = isinstance(geometry, dict) and geometry.get("kind") == "roi"
+        cams = _cameras(cameras, landmarks, source, base, roi=roi)
+        geom, ref = _geometry(geometry, source, base), None
     else:
         for key, value in (("cameras", cameras), ("geometry", geometry), ("landmarks", landmarks)):
             if value is not None:

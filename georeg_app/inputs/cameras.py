@@ -19,7 +19,8 @@ __all__ = ["load_cameras"]
 
 def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
     """Initial cameras: the JSON file as is, or another tool's calibration (pyvale, OpenCV,
-    VIC-3D, DICe) whose stereo relation is kept and posed by the landmarks."""
+    VIC-3D, DICe) whose stereo relation is kept and posed by the landmarks; without
+    landmarks (``[geometry] kind = "roi"``), the calibration's cameras as they are."""
     if cameras.file is not None:
         cams = read_cameras_json(cameras.file)
         if len(cams) != 2:
@@ -34,6 +35,8 @@ def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
         cam0, cam1 = read_dice(cameras.dice)
     else:
         cam0, cam1 = read_pyvale_csv(cameras.pyvale_csv, size)
+    if not cameras.landmarks:        # [geometry] kind = "roi": the rig places the specimen
+        return [cam0, cam1]
     R, t = stereo_transform(cam0, cam1)
     xyz = np.array([lm.xyz_mm for lm in cameras.landmarks])
     px0 = np.array([lm.cam0_px for lm in cameras.landmarks])

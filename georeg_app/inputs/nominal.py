@@ -1,20 +1,28 @@
 """The nominal model of a run: one function, :func:`build_model`, over the geometry kinds.
 
 Each kind of ``[geometry]`` has its own small module: the plates (:mod:`~georeg_app.inputs.plate`),
-a legacy mesh (:mod:`~georeg_app.inputs.mesh_file`) and a CAD part
-(:mod:`~georeg_app.inputs.cad`). Each gives the nominal spline(s) and the analysis-suitable
+a legacy mesh (:mod:`~georeg_app.inputs.mesh_file`), a CAD part
+(:mod:`~georeg_app.inputs.cad`) and a region of interest of camera 0's image triangulated by
+the rig (:mod:`~georeg_app.inputs.roi`, through :func:`specimen_setup`: it needs the images
+and the cameras, which it expresses in the specimen's frame). Each gives the nominal spline(s) and the analysis-suitable
 FE mesh (Eq. 17) that the plugin's levels and the core's measurement share.
 """
 from __future__ import annotations
 
+from typing import Sequence
+
 from adapters.fesdic_core import NominalModel, nominal_model
+from fesdic_core.cameras.camera import Camera
+from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import GeometryConfig
 from georeg_app.inputs.cad import cad_faces, cad_model, cad_refinements
 from georeg_app.inputs.mesh_file import mesh_model
+from georeg_app.errors import InputError
 from georeg_app.inputs.plate import coarse_patch
+from georeg_app.inputs.roi import RoiSpecimen, roi_specimen
 
-__all__ = ["build_model", "coarse_faces", "refinements", "MIN_PX_PER_ELEMENT"]
+__all__ = ["specimen_setup", "build_model", "coarse_faces", "refinements", "MIN_PX_PER_ELEMENT"]
 
 MIN_PX_PER_ELEMENT = 16     # pixels an FE element needs at full resolution (9 Q9 nodes)
 
@@ -39,7 +47,24 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
     """
     if geometry.kind == "mesh":
         return mesh_model(geometry.file)
+    if geometry.kind == "roi":
+        raise InputError('[geometry] kind = "roi" is built from the images and the cameras: '
+                         "use specimen_setup")
     if geometry.kind == "cad":
         return cad_model(geometry.file, geometry.faces, geometry.elements, levels)
     return nominal_model(coarse_patch(geometry), refinements(geometry, levels), "Q9",
                          name=geometry.kind)
+
+
+def specimen_setup(geometry: GeometryConfig, levels: int, cameras: Sequence[Camera],
+                   images: Sequence[Image]) -> tuple[NominalModel, list, RoiSpecimen | None]:
+    """The nominal model and the cameras a run measures with, for every geometry kind.
+
+    Returns ``(model, cameras, roi)``: for ``kind = "roi"`` the cameras are expressed in the
+    specimen frame and ``roi`` says how it was placed (:class:`~georeg_app.inputs.roi.RoiSpecimen`);
+    for the other kinds the cameras are returned as given and ``roi`` is None.
+    """
+    if geometry.kind == "roi":
+        roi = roi_specimen(geometry, cameras, images, levels)
+        return roi.model, list(roi.cameras), roi
+    return build_model(geometry, levels), list(cameras), None

@@ -31,7 +31,8 @@ from georeg_plugin.levels.solver import GeometricRegularization
 from georeg_app.config.measure import Config, OutputConfig
 from georeg_app.config.track import TrackConfig
 from georeg_app.errors import InputError, MeasurementFailed
-from georeg_app.inputs.nominal import build_model
+from georeg_app.inputs.cameras import load_cameras
+from georeg_app.inputs.nominal import specimen_setup
 from georeg_app.shape.methods import measure_specs
 from georeg_app.shape.pipeline import run_methods
 
@@ -98,7 +99,8 @@ def load_reference(config: TrackConfig, progress=False
                                 f"({result.spec.label}): {result.failure}")
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
-    nominal = build_model(config.geometry, config.method.fixed_levels)
+    nominal, _, _ = specimen_setup(config.geometry, config.method.fixed_levels,   # as measured
+                                   load_cameras(config.cameras, images), images)
     model = dataclasses.replace(nominal, mesh=mesh)        # a part keeps its faces
     return mesh, tuple(m.cameras), images, model, f"measured here ({result.spec.label})"
 

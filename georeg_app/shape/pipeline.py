@@ -33,7 +33,8 @@ from georeg_plugin.spline.patch import SplinePatch
 from georeg_app.config.measure import AUTO, Config, GeometryConfig
 from georeg_app.errors import InputError
 from georeg_app.inputs.cameras import load_cameras
-from georeg_app.inputs.nominal import MIN_PX_PER_ELEMENT, build_model, coarse_faces, refinements
+from georeg_app.inputs.nominal import (MIN_PX_PER_ELEMENT, coarse_faces, refinements,
+                                      specimen_setup)
 from georeg_app.shape.demo import Truth
 from georeg_app.shape.methods import MethodSpec
 from georeg_app.shape.visibility import scene_occluders, visibility_settings
@@ -79,7 +80,9 @@ class MethodResult:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class RunResult:
-    """All methods of a run, with what produced them (config, input checksums, version)."""
+    """All methods of a run, with what produced them (config, input checksums, version);
+    ``specimen``: for ``[geometry] kind = "roi"``, the specimen frame in the calibration's
+    frame and the surface fit (:meth:`georeg_app.inputs.roi.RoiSpecimen.summary`)."""
 
     results: tuple
     truth_available: bool
@@ -89,6 +92,7 @@ class RunResult:
     inputs: tuple = ()
     version: str = "unknown"
     started: str = ""
+    specimen: dict | None = None      # kind = "roi": the specimen frame and the surface fit
 
 
 # ----------------------------------------------------------------------------- methods
@@ -125,7 +129,7 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
         check_scales(images, config.method.scale_sequence)
     except MeasurementInputError as err:
         raise InputError(f"[method] scales = {config.method.scales}: {err}") from None
-    if config.geometry.kind == "mesh":
+    if config.geometry.kind in ("mesh", "roi"):      # sizes known once the mesh is built
         return
     levels = config.method.fixed_levels
     coarse = sum(int(np.prod(f.n_elements)) for f in coarse_faces(config.geometry))
@@ -254,11 +258,12 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     check_sizes(config, images)
     cameras = load_cameras(config.cameras, images)
     method = config.method
-    model = build_model(config.geometry, method.fixed_levels)
+    model, cameras, roi = specimen_setup(config.geometry, method.fixed_levels, cameras, images)
     check_levels(model, method.fixed_levels, config.geometry)
     occluders = scene_occluders(config.geometry) if method.self_occlusion else None
-    logger.info("nominal model: %s, %d Q9 nodes, %d elements%s", config.geometry.kind,
-                model.mesh.n_nodes, model.mesh.n_elements,
+    families = "/".join(sorted({b.family.name for b in model.mesh.blocks}))
+    logger.info("nominal model: %s, %d %s nodes, %d elements%s", config.geometry.kind,
+                model.mesh.n_nodes, families, model.mesh.n_elements,
                 "" if occluders is None else f", {len(occluders)} occluder triangles")
     results = []
     for k, spec in enumerate(specs, start=1):
@@ -281,6 +286,7 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     return RunResult(results=tuple(results), truth_available=truth is not None,
                      images=tuple(im.values for im in images),
                      one_fine_iteration_s=_one_fine_iteration_s(results), config=config,
-                     inputs=input_files(config), version=installed_version(), started=started)
+                     inputs=input_files(config), version=installed_version(), started=started,
+                     specimen=None if roi is None else roi.summary())
 
 
