@@ -126,7 +126,7 @@ def _gray8(values: np.ndarray) -> np.ndarray:
 
 
 def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray | None = None,
-                   max_features: int = 20000) -> tuple[np.ndarray, np.ndarray, int]:
+                   max_features: int = 5000) -> tuple[np.ndarray, np.ndarray, int]:
     """SIFT matches of image 0 (inside ``mask0``) in image 1, Lowe's ratio test.
 
     Parameters

@@ -9,7 +9,7 @@ from georeg_app.shape.outputs import (SUMMARY_FILE, CONVERGENCE_FILE, REPORT_FIL
                                       write_method_vtu, convergence_rows, write_convergence_csv,
                                       write_spline_outputs, write_all)
 from georeg_app.shape.pipeline import (MethodResult, RunResult, check_sizes, check_levels,
-                                       input_files, run_methods)
+                                       describe_mesh, input_files, run_methods)
 from georeg_app.shape.visibility import visibility_settings, scene_occluders
 
 __all__ = ["DEMO", "Truth", "demo_specimen", "demo_config", "MethodSpec", "tikhonov_spec",
@@ -17,5 +17,5 @@ __all__ = ["DEMO", "Truth", "demo_specimen", "demo_config", "MethodSpec", "tikho
            "REPORT_FILE", "CONVERGENCE_COLUMNS", "write_json_atomic", "OutputWriter", "safe_stem",
            "method_stems", "summary_dict", "seen_fraction", "write_method_vtu", "convergence_rows",
            "write_convergence_csv", "write_spline_outputs", "write_all", "MethodResult",
-           "RunResult", "check_sizes", "check_levels", "input_files", "run_methods",
+           "RunResult", "check_sizes", "check_levels", "describe_mesh", "input_files", "run_methods",
            "visibility_settings", "scene_occluders"]

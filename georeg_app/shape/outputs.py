@@ -226,8 +226,8 @@ def summary_dict(run) -> dict:
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
     "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
     "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
-    "levels_chosen", "regularization"}], "specimen"}`` (``specimen``: the frame and surface fit
-    of ``[geometry] kind = "roi"``, else null). ``status`` is "ok" or
+    "levels_chosen", "regularization"}]}``, plus ``"specimen"`` (the frame and surface fit) for
+    ``[geometry] kind = "roi"``. ``status`` is "ok" or
     "failed" (``failure`` says why); a method that failed without any state has null
     measurement fields and no mesh file.
     """
@@ -272,8 +272,11 @@ def summary_dict(run) -> dict:
             })
         methods.append(entry)
     failed = [e["label"] for e in methods if e["status"] != "ok"]
-    return {"truth_available": bool(run.truth_available), "failed_methods": failed,
-            "methods": methods, "specimen": getattr(run, "specimen", None)}
+    doc = {"truth_available": bool(run.truth_available), "failed_methods": failed,
+           "methods": methods}
+    if getattr(run, "specimen", None) is not None:        # kind = "roi" only
+        doc["specimen"] = run.specimen
+    return doc
 
 
 def seen_fraction(measurement, n_elements: int) -> np.ndarray:

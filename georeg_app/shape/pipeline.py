@@ -42,7 +42,7 @@ from georeg_app.version import installed_version
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["MethodResult", "RunResult", "check_sizes", "check_levels", "input_files",
+__all__ = ["MethodResult", "RunResult", "check_sizes", "describe_mesh", "check_levels", "input_files",
            "run_methods"]
 
 
@@ -147,6 +147,13 @@ def check_sizes(config: Config, images: Sequence[Image]) -> None:
             f"the FE mesh would have {elements} elements, more than the {w} x {h} px images "
             f"can measure (at least {MIN_PX_PER_ELEMENT} px an element); use at most "
             f"{largest} levels")
+
+
+def describe_mesh(kind: str, mesh: SurfaceMesh) -> str:
+    """``"<kind>, <n> <family> nodes, <m> elements"``, the mesh's real element families
+    (``Q4``, ``Q9``, ``T3/Q4`` for a mixed mesh)."""
+    families = "/".join(sorted({b.family.name for b in mesh.blocks}))
+    return f"{kind}, {mesh.n_nodes} {families} nodes, {mesh.n_elements} elements"
 
 
 def check_levels(model: NominalModel, levels: int, geometry: GeometryConfig) -> None:
@@ -261,9 +268,7 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     model, cameras, roi = specimen_setup(config.geometry, method.fixed_levels, cameras, images)
     check_levels(model, method.fixed_levels, config.geometry)
     occluders = scene_occluders(config.geometry) if method.self_occlusion else None
-    families = "/".join(sorted({b.family.name for b in model.mesh.blocks}))
-    logger.info("nominal model: %s, %d %s nodes, %d elements%s", config.geometry.kind,
-                model.mesh.n_nodes, families, model.mesh.n_elements,
+    logger.info("nominal model: %s%s", describe_mesh(config.geometry.kind, model.mesh),
                 "" if occluders is None else f", {len(occluders)} occluder triangles")
     results = []
     for k, spec in enumerate(specs, start=1):
