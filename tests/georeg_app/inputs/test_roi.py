@@ -74,6 +74,14 @@ def plate(tmp_path_factory):
     return folder, spec, cams, arrays
 
 
+@pytest.fixture
+def noise_folder(tmp_path):
+    """Files of a run without a render (for the checks made before any matching)."""
+    rng = np.random.default_rng(0)
+    cams = demo_cameras(image_size=(640, 480), field_mm=80.0)
+    return write_user_data(tmp_path, [rng.integers(0, 255, (480, 640)) for _ in cams], cams)
+
+
 def _config(folder, roi, name="roi.toml", elements=300, method="fe", cameras="cameras.json"):
     path = folder / name
     path.write_text(CONFIG.format(roi=roi, elements=elements, method=method, cameras=cameras))
@@ -182,8 +190,8 @@ def test_measure_a_rectangular_roi_with_georeg_and_tikhonov(plate, tmp_path):
         assert np.sqrt(np.mean(z ** 2)) < 0.002, (method, np.sqrt(np.mean(z ** 2)))
 
 
-def test_roi_keys_are_checked_by_the_config_reader(plate):
-    folder = plate[0]
+def test_roi_keys_are_checked_by_the_config_reader(noise_folder):
+    folder = noise_folder
     poly = "polygon_px = [[10, 10], [100, 10], [100, 90]]"
     cases = [("", "exactly one of `polygon_px` and `mask`"),
              (poly + '\nmask = "cam0.png"', "got both"),
@@ -208,8 +216,9 @@ def test_roi_keys_are_checked_by_the_config_reader(plate):
         load_config(marks)
 
 
-def test_an_roi_outside_the_image_is_one_error_and_nothing_written(plate, tmp_path, capsys):
-    config = _config(plate[0], "polygon_px = [[10, 10], [700, 10], [300, 200]]", name="out.toml")
+def test_an_roi_outside_the_image_is_one_error_and_nothing_written(noise_folder, capsys):
+    tmp_path = noise_folder
+    config = _config(noise_folder, "polygon_px = [[10, 10], [700, 10], [300, 200]]", name="out.toml")
     _fails_naming(capsys, config, tmp_path / "out", "polygon_px", "outside camera 0's image")
 
 
@@ -241,3 +250,42 @@ def test_build_model_refuses_the_roi_kind_without_images():
     from georeg_app.inputs.nominal import build_model
     with pytest.raises(InputError, match="specimen_setup"):
         build_model(GeometryConfig("roi", roi=RoiConfig(polygon=np.eye(3)[:, :2])), 2)
+
+
+@pytest.mark.slow
+def test_a_quadric_roi_follows_a_twisted_plate_that_a_plane_misses(twisted_scene, caplog):
+    specimen, cams, images = twisted_scene                # z = k x y, 0.5 mm at the corners
+    roi = RoiConfig(polygon=_px(cams[0], np.array(OUTER, float)))
+    caplog.set_level("WARNING")
+    flat = roi_specimen(GeometryConfig("roi", elements=200, roi=roi), cams, images, 2)
+    assert any("departs from it" in r.message for r in caplog.records)
+    r = roi_specimen(GeometryConfig("roi", elements=200, roi=RoiConfig(polygon=roi.polygon,
+                                                                      surface="quadric")),
+                     cams, images, 2)
+    assert r.misfit_px < 0.3 * flat.misfit_px and r.misfit_px < 2 * r.epipolar_px
+    world = r.model.mesh.nodes @ r.frame_rotation.T + r.frame_origin
+    error = world[:, 2] - specimen.height(world[:, 0], world[:, 1])
+    assert np.sqrt(np.mean(error ** 2)) < 0.005, np.sqrt(np.mean(error ** 2))
+    assert np.ptp(r.model.mesh.nodes[:, 2]) > 0.5         # the nominal mesh is curved
+
+
+def test_a_mask_gives_the_outline_and_the_holes_of_its_polygons(tmp_path):
+    from georeg_app.inputs.roi import roi_loops
+    outer = np.array([[40, 30], [600, 40], [590, 440], [50, 430]], float)
+    hole = np.array([[200, 200], [300, 200], [300, 280], [200, 280]], float)
+    mask = np.zeros((480, 640), np.uint8)
+    cv2.fillPoly(mask, [outer.astype(np.int32)], 255)
+    cv2.fillPoly(mask, [hole.astype(np.int32)], 0)
+    cv2.imwrite(str(tmp_path / "roi.png"), mask)
+    from_mask, loops = roi_loops(RoiConfig(mask=tmp_path / "roi.png"), (480, 640))
+    from_polygons, _ = roi_loops(RoiConfig(polygon=outer, exclude=(hole,)), (480, 640))
+    assert len(loops) == 2                                   # the outline and the hole
+    assert abs(cv2.contourArea(loops[1].astype(np.float32)) - 100 * 80) < 0.05 * 8000
+    differ = np.count_nonzero(from_mask != from_polygons)
+    assert differ < 0.01 * from_polygons.sum(), differ       # the boundary pixels only
+    cv2.imwrite(str(tmp_path / "small.png"), mask[:100])
+    with pytest.raises(InputError, match="mask: .* is 640 x 100 px, camera 0's image 640 x 480"):
+        roi_loops(RoiConfig(mask=tmp_path / "small.png"), (480, 640))
+    cv2.imwrite(str(tmp_path / "empty.png"), 0 * mask)
+    with pytest.raises(InputError, match="no nonzero region"):
+        roi_loops(RoiConfig(mask=tmp_path / "empty.png"), (480, 640))
