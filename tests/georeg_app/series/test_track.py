@@ -130,6 +130,29 @@ def test_track_measures_the_reference_shape_first(series, tmp_path):
     assert summary["reference"].startswith("measured here")
 
 
+def test_track_with_a_region_of_interest_as_the_reference_geometry(series, tmp_path):
+    """``[geometry] kind = "roi"`` without [reference]: the specimen placed by the rig from a
+    polygon of camera 0's image, its shape measured (FE), then the first frame (FE)."""
+    folder, _ = series
+    cam0 = demo_cameras(image_size=(320, 240), field_mm=72.0)[0]
+    corners = cam0.project(np.array([[-25, -17, 0], [25, -17, 0], [25, 17, 0], [-25, 17, 0.0]]))
+    extra = ('[cameras]\nfile = "cameras.json"\n[geometry]\nkind = "roi"\n'
+             f"polygon_px = {np.round(corners, 2).tolist()}\nelements = 30\n"
+             '[method]\nname = "fe"\ncalibrate = false\nscales = 2')
+    config = _config(folder, series_keys='cam0 = ["frames/f1_cam0.png"]\ncam1 = ["frames/f1_cam1.png"]',
+                     extra=extra, displacement='method = "fe"\nscales = 3')
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    frame = summary["frames"][0]
+    assert summary["reference"].startswith("measured here") and frame["status"] == "ok"
+    U = _point_data(out / frame["mesh_file"])["displacement_mm"]
+    # the specimen frame is the plate's to 1e-3 rad: a translation is the same in both;
+    # measured 2.6, 2.2 and 9.6 um (FE displacement on the ROI's 30 elements, 320 x 240 px)
+    rms = np.sqrt(np.mean((U - MOTIONS[0](np.zeros((len(U), 3)))) ** 2, axis=0))
+    assert np.all(rms[:2] < 3e-3) and rms[2] < 1.2e-2, f"{1e3 * rms} um"
+
+
 def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
     """`georeg track` of the first frame with the reference shape measured here (``extra``:
     the [cameras], [geometry] and [method] tables) and the georeg displacement: the frame is
