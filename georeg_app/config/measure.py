@@ -19,7 +19,8 @@ A complete example (every key; optional keys show their default in parentheses):
     # opencv = "stereo.yml"       # OpenCV FileStorage (.yml/.xml/.json): K1 D1 K2 D2 R T
     # vic3d = "project.z3d"       # VIC-3D project (.z3d zip or its project.xml)
     # dice = "cal.xml"            # DICe camera-system XML
-                                  # all but `file`: the specimen pose comes from >= 4 landmarks:
+                                  # all but `file`: the specimen pose comes from >= 4 landmarks
+                                  # (none with [geometry] kind = "roi"):
     # [[landmarks]]               # one table per landmark (also accepted: [[cameras.landmarks]])
     # xyz_mm = [-50.0, -25.0, 0.0]   # world point on the specimen (mm)
     # cam0_px = [812.3, 1040.8]      # where camera 0 sees it (x = column, y = row, px)
@@ -27,8 +28,6 @@ A complete example (every key; optional keys show their default in parentheses):
 
     [geometry]                    # required: the nominal surface
     kind = "plate_with_hole"      # "rectangle" | "plate_with_hole" | "mesh" | "cad" | "roi"
-                                  # ("roi": polygon_px, exclude_px, mask, surface: see
-                                  # georeg_app.config.roi; no landmarks needed)
     length_mm = 100.0             # along x; rectangle and plate_with_hole
     width_mm = 50.0               # along y; rectangle and plate_with_hole
     hole_radius_mm = 14.0         # plate_with_hole only (0 < r < width/2)
@@ -37,6 +36,13 @@ A complete example (every key; optional keys show their default in parentheses):
                                   # untrimmed B-spline faces, entity 128) or, with the
                                   # optional 'cad' extra, STEP (.step, .stp) or trimmed IGES
     # faces = [0, "lid"]          # kind = "cad" only: faces by index or name (default all)
+    # polygon_px = [[420, 310], [1500, 300], [1510, 900], [430, 905]]
+                                  # kind = "roi": the specimen drawn on camera 0's reference
+                                  # image, [x, y] px vertices (x = column, y = row); the rig's
+                                  # triangulation places it, no landmarks (georeg_app.inputs.roi)
+    # exclude_px = [[[900, 500], [1000, 500], [1000, 600]]]   # "roi": holes (default none)
+    # mask = "roi.png"            # "roi": instead of the polygons, nonzero = specimen
+    # surface = "plane"           # "roi": "plane" | "quadric" (z = f(x, y)) (default "plane")
     elements = 400                # approximate number of FE elements (default: chosen by the method)
                                   # (plates are centred at the world origin in the z = 0 plane)
 
@@ -168,7 +174,15 @@ class GeometryConfig:
     file: Path | None = None
     elements: int | None = None
     faces: tuple | None = None
-    roi: RoiConfig | None = None
+    polygon_px: tuple | None = None
+    exclude_px: tuple = ()
+    mask: Path | None = None
+    surface: str = "plane"
+
+    @property
+    def roi(self) -> RoiConfig | None:
+        """The region of interest of ``kind = "roi"`` (arrays), else None."""
+        return RoiConfig.of(self) if self.kind == "roi" else None
 
 
 @dataclass(frozen=True)
@@ -313,7 +327,7 @@ def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
                 cad_faces(path, selection)        # the file reads, the faces exist
             except ValueError as err:
                 raise t.error(key, str(err)) from None
-    return GeometryConfig(kind, length, width, radius, path, elements, faces, roi)
+    return GeometryConfig(kind, length, width, radius, path, elements, faces, **roi)
 
 
 def _face_list(value: Any) -> tuple:

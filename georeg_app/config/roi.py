@@ -39,6 +39,15 @@ class RoiConfig:
     mask: Path | None = None
     surface: str = "plane"
 
+    @classmethod
+    def of(cls, geometry: Any) -> RoiConfig:
+        """The ROI of a ``GeometryConfig`` (its keys ``polygon_px``, ``exclude_px``, ``mask``,
+        ``surface``), as arrays."""
+        polygon = geometry.polygon_px
+        return cls(polygon=None if polygon is None else np.array(polygon, dtype=float),
+                   exclude=tuple(np.array(p, dtype=float) for p in geometry.exclude_px),
+                   mask=geometry.mask, surface=geometry.surface)
+
 
 def _polygon(value: Any) -> np.ndarray:
     a = np.asarray(value, dtype=float) if isinstance(value, list) else None
@@ -63,8 +72,13 @@ def _area(polygon: np.ndarray) -> float:
 _POLYGON = "a list of at least 3 [x, y] pixel vertices enclosing an area"
 
 
-def take_roi(t: Table, kind: str, base: Path) -> RoiConfig | None:
-    """Take the ROI keys of ``[geometry]`` (before ``t.finish()``); None unless kind "roi".
+def _rows(polygon: np.ndarray) -> tuple:
+    return tuple(tuple(row) for row in polygon.tolist())
+
+
+def take_roi(t: Table, kind: str, base: Path) -> dict:
+    """Take the ROI keys of ``[geometry]`` (before ``t.finish()``): the keyword arguments of
+    ``GeometryConfig`` they give (polygons as tuples of ``(x, y)``); empty unless kind "roi".
 
     Raises ConfigError naming the key: a key of the ROI with another kind, neither or both
     of ``polygon_px`` and ``mask``, a polygon that is not one, an unknown ``surface``.
@@ -78,7 +92,7 @@ def take_roi(t: Table, kind: str, base: Path) -> RoiConfig | None:
     if kind != "roi":
         for key in given:
             raise t.error(key, f'not used with kind = "{kind}"; remove it')
-        return None
+        return {}
     if (polygon is None) == (mask is None):
         raise t.error(None, 'kind = "roi" needs exactly one of `polygon_px` and `mask`, got '
                             + ("both" if polygon is not None else "neither"))
@@ -88,5 +102,6 @@ def take_roi(t: Table, kind: str, base: Path) -> RoiConfig | None:
     if surface not in ROI_SURFACES:
         raise t.error("surface", "expected one of " + ", ".join(f'"{s}"' for s in ROI_SURFACES)
                       + f', got "{surface}"')
-    return RoiConfig(polygon=polygon, exclude=exclude or (),
-                     mask=existing_file(t, "mask", mask, base), surface=surface)
+    return {"polygon_px": None if polygon is None else _rows(polygon),
+            "exclude_px": tuple(_rows(p) for p in exclude or ()),
+            "mask": existing_file(t, "mask", mask, base), "surface": surface}

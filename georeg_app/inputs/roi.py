@@ -23,8 +23,12 @@ No CAD and no landmarks: the calibrated rig places the specimen.
    (:mod:`georeg_plugin.spline.trimmed`): an element is kept when its nine nodes lie inside
    the outline and outside every exclusion. Every kept element is an undistorted rectangle
    of the grid (a staircase boundary, well shaped by construction, at most one element
-   width inside the outline); elements with a node that camera 1 does not see are left out,
-   and the share of the ROI that camera 1 does not see is logged.
+   width inside the outline). A polygon of four vertices without exclusions (a rectangle
+   drawn on the image: a quadrilateral on a plane, as a pinhole maps lines to lines) is
+   its own spline instead, the bilinear patch of its four cast corners, meshed whole
+   (no element cut, none dropped: every spline dof is seen). Elements with a node that
+   camera 1 does not see are left out, and the share of the ROI that camera 1 does not see
+   is logged.
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ from fesdic_core.cameras.camera import Camera
 from fesdic_core.cameras.triangulation import StereoPoints, normalised_points, stereo_points
 from fesdic_core.fe.mesh import CellBlock, SurfaceMesh
 from fesdic_core.imaging.image import Image
-from georeg_plugin.spline.geometries import rectangle
+from georeg_plugin.spline.geometries import quadrilateral, rectangle
 from georeg_plugin.spline.refine import refine_to_elements
 from georeg_plugin.spline.trimmed import inside_loops
 from georeg_app.config.measure import GeometryConfig
@@ -204,10 +208,18 @@ def _surface(roi: RoiConfig, cams, images, mask) -> tuple[StereoPoints, SurfaceF
     return points, fit, misfit, epipolar
 
 
-def _patch(outline: np.ndarray, fit: SurfaceFit | None):
-    lo, hi = outline.min(axis=0), outline.max(axis=0)
-    size = hi - lo
-    patch = rectangle(size[0], size[1], center=tuple(0.5 * (lo + hi)))
+def _patch(outline: np.ndarray, fit: SurfaceFit | None, corners: np.ndarray | None = None):
+    """The nominal spline: the rectangle bounding ``outline`` (k, 2), or the quadrilateral
+    of ``corners`` (4, 2); z of the quadric ``fit`` (least squares) or 0."""
+    if corners is None:
+        lo, hi = outline.min(axis=0), outline.max(axis=0)
+        size = hi - lo
+        patch = rectangle(size[0], size[1], center=tuple(0.5 * (lo + hi)))
+    else:
+        c = corners if _signed_area(corners) > 0 else corners[::-1]    # normal +z
+        patch = quadrilateral(np.column_stack([c, np.zeros(4)]))
+        size = np.array([0.5 * (np.linalg.norm(c[1] - c[0]) + np.linalg.norm(c[2] - c[3])),
+                         0.5 * (np.linalg.norm(c[3] - c[0]) + np.linalg.norm(c[2] - c[1]))])
     aspect = size[0] / size[1]
     n_u, n_v = (max(1, round(aspect)), 1) if aspect >= 1 else (1, max(1, round(1 / aspect)))
     if (n_u, n_v) != (1, 1):
@@ -223,15 +235,22 @@ def _patch(outline: np.ndarray, fit: SurfaceFit | None):
     return patch
 
 
-def _mesh(outline_loops, patch, elements: int | None, levels: int, cam1: Camera, where: str):
-    area = abs(cv2.contourArea(outline_loops[0].astype(np.float32)))
-    box = float(np.prod(np.ptp(outline_loops[0], axis=0)))
+def _signed_area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _mesh(outline_loops, patch, elements: int | None, levels: int, cam1: Camera, where: str,
+          trim: bool = True):
+    area = abs(_signed_area(outline_loops[0]))
+    box = float(np.prod(np.ptp(outline_loops[0], axis=0))) if trim else area
     target = int((elements or 1000) * box / max(area, 1e-12))
     model = nominal_model(patch, cad_refinements([patch], target, levels), "Q9", name="roi")
     nodes, conn = model.mesh.nodes, model.mesh.blocks[0].connectivity
     pts = nodes[conn][..., :2]
     shrunk = pts + 1e-7 * (pts.mean(axis=1, keepdims=True) - pts)
-    keep = inside_loops(shrunk.reshape(-1, 2), outline_loops).reshape(conn.shape).all(axis=1)
+    keep = (inside_loops(shrunk.reshape(-1, 2), outline_loops).reshape(conn.shape).all(axis=1)
+            if trim else np.ones(len(conn), bool))
     seen = _seen(cam1, nodes)[conn].all(axis=1)
     if not (keep & seen).any():
         raise InputError(f"{where}: no FE element fits inside the ROI (and in camera 1's view); "
@@ -240,8 +259,8 @@ def _mesh(outline_loops, patch, elements: int | None, levels: int, cam1: Camera,
     used, renumber = np.unique(conn, return_inverse=True)
     block = CellBlock(family=model.mesh.blocks[0].family, connectivity=renumber.reshape(conn.shape))
     mesh = SurfaceMesh(nodes=nodes[used], blocks=(block,), name="roi")
-    logger.info("ROI mesh: %d of the %d Q9 elements of the bounding rectangle lie inside the "
-                "outline%s", len(conn), int(keep.size),
+    logger.info("ROI mesh: %d of the %d Q9 elements of the %s lie inside the outline%s",
+                len(conn), int(keep.size), "bounding rectangle" if trim else "quadrilateral",
                 "" if seen[keep].all() else f" ({int((keep & ~seen).sum())} left out: camera 1 "
                                               "does not see them)")
     return NominalModel(patch=model.patch, mesh=mesh, uv=model.uv[used])
@@ -285,7 +304,11 @@ def roi_specimen(geometry: GeometryConfig, cameras: Sequence[Camera], images: Se
             np.column_stack([np.ones(len(local)), local[:, 0], local[:, 1], local[:, 0] ** 2,
                              local[:, 0] * local[:, 1], local[:, 1] ** 2])[fit.inliers],
             local[fit.inliers, 2], rcond=None)[0])
-    model = _mesh(outline, _patch(outline[0], local_fit), geometry.elements, levels, cams[1], where)
+    corners = None
+    if roi.polygon is not None and len(roi.polygon) == 4 and not roi.exclude:
+        corners = ((ray_hits(cameras[0], _rays(cameras[0], roi.polygon), fit) - origin) @ R_f)[:, :2]
+    model = _mesh(outline, _patch(outline[0], local_fit, corners), geometry.elements, levels,
+                  cams[1], where, trim=corners is None)
     samples = np.argwhere(mask)[:: max(1, int(mask.sum()) // 20000)][:, ::-1].astype(float)
     on_surface = ray_hits(cameras[0], _rays(cameras[0], samples), fit)
     unseen = 1.0 - float(_seen(cameras[1], on_surface).mean())

@@ -126,9 +126,9 @@ def test_roi_specimen_places_the_plate_from_the_rig(plate):
     folder, _, cams, arrays = plate
     moved = _moved(cams)
     images = [Image.from_array(a) for a in arrays]
-    roi = RoiConfig(polygon=_px(cams[0], np.array(OUTER, float)),
-                    exclude=(_px(cams[0], np.array(HOLE, float)),))
-    r = roi_specimen(GeometryConfig("roi", elements=300, roi=roi), moved, images, 2)
+    geometry = GeometryConfig("roi", elements=300, polygon_px=_px(cams[0], np.array(OUTER, float)),
+                              exclude_px=(_px(cams[0], np.array(HOLE, float)),))
+    r = roi_specimen(geometry, moved, images, 2)
     R = cv2.Rodrigues(MOVE_RVEC)[0]
     z_true = R[:, 2]                                   # the plate's normal in the given frame
     angle = np.degrees(np.arccos(r.frame_rotation[:, 2] @ z_true))
@@ -148,6 +148,15 @@ def test_roi_specimen_places_the_plate_from_the_rig(plate):
     conn = r.model.mesh.blocks[0].connectivity
     area = r.model.mesh.n_elements * np.prod(np.ptp(nodes[conn[0], :2], axis=0))
     assert 0.75 * (54 * 36 - 96) < area <= 54 * 36 - 96
+    # four vertices, no hole: the quadrilateral of the cast corners, meshed whole
+    quad = roi_specimen(GeometryConfig("roi", elements=300, polygon_px=geometry.polygon_px),
+                        moved, images, 2)
+    conn = quad.model.mesh.blocks[0].connectivity
+    ratio = quad.model.mesh.n_elements / np.prod(quad.model.patch.n_elements)
+    assert ratio >= 300 / 2 and 4 ** round(np.log(ratio) / np.log(4)) == ratio   # none dropped
+    plate_xy = (quad.model.mesh.nodes @ quad.frame_rotation.T + quad.frame_origin - MOVE_T) @ R
+    np.testing.assert_allclose(plate_xy[:, :2].min(axis=0), [-27, -18], atol=0.05)
+    np.testing.assert_allclose(plate_xy[:, :2].max(axis=0), [27, 18], atol=0.05)
 
 
 @pytest.mark.slow
@@ -249,18 +258,17 @@ def test_bad_rois_are_one_error_each_and_nothing_written(plate, tmp_path, capsys
 def test_build_model_refuses_the_roi_kind_without_images():
     from georeg_app.inputs.nominal import build_model
     with pytest.raises(InputError, match="specimen_setup"):
-        build_model(GeometryConfig("roi", roi=RoiConfig(polygon=np.eye(3)[:, :2])), 2)
+        build_model(GeometryConfig("roi", polygon_px=((0, 0), (1, 0), (0, 1))), 2)
 
 
 @pytest.mark.slow
 def test_a_quadric_roi_follows_a_twisted_plate_that_a_plane_misses(twisted_scene, caplog):
     specimen, cams, images = twisted_scene                # z = k x y, 0.5 mm at the corners
-    roi = RoiConfig(polygon=_px(cams[0], np.array(OUTER, float)))
+    polygon = _px(cams[0], np.array(OUTER, float))
     caplog.set_level("WARNING")
-    flat = roi_specimen(GeometryConfig("roi", elements=200, roi=roi), cams, images, 2)
+    flat = roi_specimen(GeometryConfig("roi", elements=200, polygon_px=polygon), cams, images, 2)
     assert any("departs from it" in r.message for r in caplog.records)
-    r = roi_specimen(GeometryConfig("roi", elements=200, roi=RoiConfig(polygon=roi.polygon,
-                                                                      surface="quadric")),
+    r = roi_specimen(GeometryConfig("roi", elements=200, polygon_px=polygon, surface="quadric"),
                      cams, images, 2)
     assert r.misfit_px < 0.3 * flat.misfit_px and r.misfit_px < 2 * r.epipolar_px
     world = r.model.mesh.nodes @ r.frame_rotation.T + r.frame_origin

@@ -22,15 +22,14 @@ pytestmark = [pytest.mark.slow,
                                  reason=f"the GT4 data are not at {DATA}")]
 
 
-def _run(tmp_path, calibration):
-    text = EXAMPLE.read_text().replace('"../../../shared/data/', f'"{DATA.parent}/')
+def _run(tmp_path, calibration, example=EXAMPLE):
+    text = example.read_text().replace('"../../../shared/data/', f'"{DATA.parent}/')
     if calibration == "dice":
         text = text.replace("\nvic3d = ", "\n# vic3d = ").replace("\n# dice = ", "\ndice = ")
-    text = text.replace("[method]", '[method]\nname = "fe"').replace("elements = 800",
-                                                                     "elements = 300")
-    config = tmp_path / f"{calibration}.toml"
+    text = text.replace("elements = 800", "elements = 300")
+    config = tmp_path / f"{calibration}_{example.stem}.toml"
     config.write_text(text)
-    out = tmp_path / calibration
+    out = tmp_path / f"{calibration}_{example.stem}"
     assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     (method,) = summary["methods"]
@@ -54,3 +53,11 @@ def test_the_gt4_specimen_from_its_roi_with_two_calibrations(tmp_path):
     # the two calibrations of the rig put the specimen's plane at the same angle to camera 0
     angle = np.degrees(np.arccos(np.clip(normals[0] @ normals[1], -1, 1)))
     assert angle < 1.0, angle
+
+
+def test_georeg_auto_on_a_rectangle_of_the_gt4_specimen(tmp_path):
+    for calibration in ("vic3d", "dice"):
+        specimen, method, _ = _run(tmp_path, calibration, EXAMPLE.with_name("rectangle.toml"))
+        assert method["name"] == "georeg" and method["status"] == "ok", method
+        assert method["residual_to_noise"] < 1.0 and method["levels_chosen"]["chosen_level"] >= 1
+        assert specimen["misfit_px"] < 1.5 * specimen["epipolar_px"], specimen
