@@ -14,8 +14,8 @@ No CAD and no landmarks: the calibrated rig places the specimen.
    above :data:`WARN_MISFIT` times that is a warning, above :data:`MAX_MISFIT` times (and
    :data:`MIN_MISFIT_PX`) an error: the surface kind is wrong for the specimen.
 3. The specimen frame (:func:`~georeg_app.inputs.roi_surface.specimen_frame`; origin at the
-   ROI's area centroid cast through camera 0 on the surface): the cameras are expressed in
-   it, and the mesh of a plane lies in ``z = 0``.
+   area centroid of the ROI cast through camera 0 on the surface, holes subtracted): the
+   cameras are expressed in it, and the mesh of a plane lies in ``z = 0``.
 4. The mesh: the ROI's outline cast through camera 0 onto the surface (each edge sampled
    every pixel or so), its bounding rectangle in the frame's ``(x, y)`` is the nominal
    spline (near-square knot spans; for a quadric its control points fit ``z = f(x, y)``,
@@ -52,7 +52,8 @@ from georeg_app.config.measure import GeometryConfig
 from georeg_app.config.roi import RoiConfig
 from georeg_app.errors import InputError
 from georeg_app.inputs.cad import cad_refinements
-from georeg_app.inputs.roi_surface import SurfaceFit, fit_surface, ray_hits, specimen_frame
+from georeg_app.inputs.roi_surface import (SurfaceFit, fit_surface, height_fit, ray_hits,
+                                           specimen_frame)
 
 logger = logging.getLogger(__name__)
 
@@ -266,6 +267,41 @@ def _mesh(outline_loops, patch, elements: int | None, levels: int, cam1: Camera,
     return NominalModel(patch=model.patch, mesh=mesh, uv=model.uv[used])
 
 
+def _area_centroid(loops: Sequence[np.ndarray]) -> np.ndarray:
+    """Centroid (2,) of the area inside ``loops[0]`` and outside ``loops[1:]``."""
+    total, moment = 0.0, np.zeros(2)
+    for k, loop in enumerate(loops):
+        x, y = loop[:, 0], loop[:, 1]
+        cross = x * np.roll(y, -1) - np.roll(x, -1) * y
+        a = 0.5 * cross.sum()
+        c = np.array([((x + np.roll(x, -1)) * cross).sum(), ((y + np.roll(y, -1)) * cross).sum()])
+        sign = 1.0 if k == 0 else -1.0                          # holes subtract
+        total += sign * abs(a)
+        moment += sign * np.sign(a) * c / 6.0
+    return moment / total
+
+
+def _frame(camera0: Camera, fit: SurfaceFit, loops: Sequence[np.ndarray]
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The specimen frame (rotation, origin): its axes from the fit and camera 0, its origin
+    at the area centroid of the ROI cast on the surface (the plane's, then back on the
+    surface through camera 0)."""
+    rays = [_rays(camera0, _densify(loop)) for loop in loops]
+    R_f, o = specimen_frame(fit, camera0, fit.point)
+    on_plane = dataclasses.replace(fit, quadric=None)
+    xy = _area_centroid([((ray_hits(camera0, r, on_plane) - o) @ R_f)[:, :2] for r in rays])
+    centre = o + R_f[:, :2] @ xy
+    origin = ray_hits(camera0, _rays(camera0, camera0.project(centre[None])), fit)[0]
+    return specimen_frame(fit, camera0, origin)
+
+
+def _convex(corners: np.ndarray) -> bool:
+    """True if the quadrilateral ``corners`` (4, 2) is strictly convex."""
+    e = np.roll(corners, -1, axis=0) - corners
+    turn = e[:, 0] * np.roll(e[:, 1], -1) - e[:, 1] * np.roll(e[:, 0], -1)
+    return bool(np.all(turn > 0) or np.all(turn < 0))
+
+
 def roi_specimen(geometry: GeometryConfig, cameras: Sequence[Camera], images: Sequence[Image],
                  levels: int) -> RoiSpecimen:
     """The nominal model and the cameras of ``kind = "roi"`` (see the module docstring).
@@ -289,24 +325,20 @@ def roi_specimen(geometry: GeometryConfig, cameras: Sequence[Camera], images: Se
     where = _where(roi)
     mask, loops = roi_loops(roi, images[0].shape)
     points, fit, misfit, epipolar = _surface(roi, cameras, images, mask)
-    m = cv2.moments(mask.astype(np.uint8), binaryImage=True)
-    centroid = np.array([[m["m10"] / m["m00"], m["m01"] / m["m00"]]])
-    origin = ray_hits(cameras[0], _rays(cameras[0], centroid), fit)[0]
-    R_f, origin = specimen_frame(fit, cameras[0], origin)
+    R_f, origin = _frame(cameras[0], fit, loops)
     cams = tuple(_in_frame(c, R_f, origin) for c in cameras)
-    local = (points.xyz_mm - origin) @ R_f                          # (n, 3) specimen frame
-    local_fit = fit_surface(local, roi.surface) if roi.surface == "quadric" else None
-    outline = [((ray_hits(cameras[0], _rays(cameras[0], _densify(loop)), fit) - origin) @ R_f)[:, :2]
-               for loop in loops]
-    if local_fit is not None:            # the quadric's heights in the specimen's own axes
-        local_fit = dataclasses.replace(local_fit, point=np.zeros(3), axes=np.eye(3))
-        local_fit = dataclasses.replace(local_fit, quadric=np.linalg.lstsq(
-            np.column_stack([np.ones(len(local)), local[:, 0], local[:, 1], local[:, 0] ** 2,
-                             local[:, 0] * local[:, 1], local[:, 1] ** 2])[fit.inliers],
-            local[fit.inliers, 2], rcond=None)[0])
+
+    def cast(px: np.ndarray) -> np.ndarray:          # camera 0's pixels on the surface, (x, y)
+        return ((ray_hits(cameras[0], _rays(cameras[0], px), fit) - origin) @ R_f)[:, :2]
+
+    local_fit = (height_fit((points.xyz_mm - origin) @ R_f, fit.inliers)
+                 if roi.surface == "quadric" else None)   # z = f(x, y) in the specimen's axes
+    outline = [cast(_densify(loop)) for loop in loops]
     corners = None
     if roi.polygon is not None and len(roi.polygon) == 4 and not roi.exclude:
-        corners = ((ray_hits(cameras[0], _rays(cameras[0], roi.polygon), fit) - origin) @ R_f)[:, :2]
+        corners = cast(roi.polygon)
+        if not _convex(corners):                         # a bilinear map would fold
+            corners = None
     model = _mesh(outline, _patch(outline[0], local_fit, corners), geometry.elements, levels,
                   cams[1], where, trim=corners is None)
     samples = np.argwhere(mask)[:: max(1, int(mask.sum()) // 20000)][:, ::-1].astype(float)

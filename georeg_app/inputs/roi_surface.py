@@ -17,7 +17,8 @@ from fesdic_core.cameras.camera import Camera
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["SurfaceFit", "fit_surface", "specimen_frame", "ray_hits", "OUTLIER_SIGMAS"]
+__all__ = ["SurfaceFit", "fit_surface", "height_fit", "specimen_frame", "ray_hits",
+           "OUTLIER_SIGMAS"]
 
 #: points beyond this many robust standard deviations from the fitted surface are outliers
 OUTLIER_SIGMAS = 3.0
@@ -104,6 +105,18 @@ def fit_surface(xyz: np.ndarray, surface: str = "plane", iterations: int = 10) -
     rms = float(np.sqrt(np.mean(r[inliers] ** 2)))
     return SurfaceFit(point=point, normal=axes[2], quadric=coeffs, axes=axes, inliers=inliers,
                       rms_mm=rms)
+
+
+def height_fit(xyz: np.ndarray, inliers: np.ndarray) -> SurfaceFit:
+    """The quadric ``z = f(x, y)`` of points ``xyz`` (n, 3) given in their own frame (the
+    specimen's): least squares on the ``inliers`` (n,) bool, plane ``z = 0`` as reference."""
+    xyz = np.asarray(xyz, dtype=float).reshape(-1, 3)
+    A = _quadric_terms(xyz[:, :2])
+    coeffs = np.linalg.lstsq(A[inliers], xyz[inliers, 2], rcond=None)[0]
+    r = (xyz[:, 2] - A @ coeffs)[inliers]
+    return SurfaceFit(point=np.zeros(3), normal=np.array([0.0, 0.0, 1.0]), quadric=coeffs,
+                      axes=np.eye(3), inliers=np.asarray(inliers, bool),
+                      rms_mm=float(np.sqrt(np.mean(r ** 2))))
 
 
 def ray_hits(camera: Camera, rays: np.ndarray, fit: SurfaceFit,

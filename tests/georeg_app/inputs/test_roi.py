@@ -133,7 +133,11 @@ def test_roi_specimen_places_the_plate_from_the_rig(plate):
     z_true = R[:, 2]                                   # the plate's normal in the given frame
     angle = np.degrees(np.arccos(r.frame_rotation[:, 2] @ z_true))
     assert angle < 0.05, angle                         # z towards the cameras, on the normal
-    assert abs((r.frame_origin - MOVE_T) @ z_true) < 0.005          # the origin on the plate
+    # the origin: on the plate, at the area centroid of the outline minus the hole
+    hole_area, hole_centre = 12 * 8, np.array([10.0, -8.0])
+    centroid = -hole_area * hole_centre / (54 * 36 - hole_area)
+    origin = R.T @ (r.frame_origin - MOVE_T)                         # in the plate's frame
+    np.testing.assert_allclose(origin, [*centroid, 0.0], atol=0.01)
     assert r.fit.rms_mm < 0.02 and r.misfit_px < 0.2 and r.unseen_share == 0.0
     nodes = r.model.mesh.nodes
     assert np.max(np.abs(nodes[:, 2])) < 1e-9                        # a plane: z = 0
@@ -157,6 +161,7 @@ def test_roi_specimen_places_the_plate_from_the_rig(plate):
     plate_xy = (quad.model.mesh.nodes @ quad.frame_rotation.T + quad.frame_origin - MOVE_T) @ R
     np.testing.assert_allclose(plate_xy[:, :2].min(axis=0), [-27, -18], atol=0.05)
     np.testing.assert_allclose(plate_xy[:, :2].max(axis=0), [27, 18], atol=0.05)
+    np.testing.assert_allclose(R.T @ (quad.frame_origin - MOVE_T), 0.0, atol=0.01)
 
 
 @pytest.mark.slow
@@ -297,3 +302,10 @@ def test_a_mask_gives_the_outline_and_the_holes_of_its_polygons(tmp_path):
     cv2.imwrite(str(tmp_path / "empty.png"), 0 * mask)
     with pytest.raises(InputError, match="no nonzero region"):
         roi_loops(RoiConfig(mask=tmp_path / "empty.png"), (480, 640))
+
+
+def test_only_a_convex_four_vertex_roi_is_meshed_as_its_quadrilateral():
+    from georeg_app.inputs.roi import _convex
+    assert _convex(np.array([[0, 0], [4, 0], [4, 3], [0, 3]], float))
+    assert _convex(np.array([[0, 0], [0, 3], [4, 3], [4, 0]], float))        # either turn
+    assert not _convex(np.array([[0, 0], [4, 0], [1, 1], [0, 4]], float))    # a dart: it folds
