@@ -341,7 +341,7 @@ def roi_specimen(geometry: GeometryConfig, cameras: Sequence[Camera], images: Se
             corners = None
     model = _mesh(outline, _patch(outline[0], local_fit, corners), geometry.elements, levels,
                   cams[1], where, trim=corners is None)
-    samples = np.argwhere(mask)[:: max(1, int(mask.sum()) // 20000)][:, ::-1].astype(float)
+    samples = np.argwhere(mask)[:, ::-1].astype(float)     # every pixel (0.7 s for 1.2 Mpx)
     on_surface = ray_hits(cameras[0], _rays(cameras[0], samples), fit)
     unseen = 1.0 - float(_seen(cameras[1], on_surface).mean())
     if unseen > 0:

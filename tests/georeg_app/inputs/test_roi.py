@@ -309,3 +309,26 @@ def test_only_a_convex_four_vertex_roi_is_meshed_as_its_quadrilateral():
     assert _convex(np.array([[0, 0], [4, 0], [4, 3], [0, 3]], float))
     assert _convex(np.array([[0, 0], [0, 3], [4, 3], [4, 0]], float))        # either turn
     assert not _convex(np.array([[0, 0], [4, 0], [1, 1], [0, 4]], float))    # a dart: it folds
+
+
+@pytest.mark.slow
+def test_the_part_of_the_roi_camera_1_does_not_see_is_measured_and_left_out():
+    """A plate larger than the views, the ROI the whole of camera 0's image: camera 1's view
+    is shifted (the rig's stereo angle), so a strip of the ROI is outside it."""
+    cams = demo_cameras(image_size=(320, 240), field_mm=80.0)
+    spec = Specimen(160.0, 120.0, speckle_mm=speckle_mm_for(cams[0], 4.0), seed=3)
+    arrays = render_stereo(spec, cams, supersample=1, noise_std=2.0, seed=1, progress=False)
+    images = [Image.from_array(a) for a in arrays]
+    polygon = ((4, 4), (315, 4), (315, 235), (4, 235))
+    r = roi_specimen(GeometryConfig("roi", elements=200, polygon_px=polygon), cams, images, 2)
+    # the truth: camera 0's ROI pixels cast on the plate z = 0, seen by camera 1 or not
+    rows, cols = np.mgrid[4:236, 4:316]
+    px = np.column_stack([cols.ravel(), rows.ravel()]).astype(float)
+    rays = np.column_stack([(px - cams[0].K[:2, 2]) / cams[0].K[0, 0], np.ones(len(px))]) @ cams[0].R
+    X = cams[0].center + (-cams[0].center[2] / rays[:, 2])[:, None] * rays
+    p1 = cams[1].project(X)
+    seen = (p1[:, 0] >= 2) & (p1[:, 0] <= 317) & (p1[:, 1] >= 2) & (p1[:, 1] <= 237)
+    truth = 1 - seen.mean()
+    assert truth > 0.005 and abs(r.unseen_share - truth) < 0.1 * truth, (r.unseen_share, truth)
+    p = r.cameras[1].project(r.model.mesh.nodes)                     # the mesh: all in view
+    assert p[:, 0].min() >= 2 and p[:, 0].max() <= 317
