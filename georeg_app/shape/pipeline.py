@@ -35,6 +35,7 @@ from georeg_app.errors import InputError
 from georeg_app.inputs.cameras import load_cameras
 from georeg_app.inputs.nominal import (MIN_PX_PER_ELEMENT, coarse_faces, refinements,
                                       specimen_setup)
+from georeg_app.inputs.placement import placement_check
 from georeg_app.shape.demo import Truth
 from georeg_app.shape.methods import MethodSpec
 from georeg_app.shape.visibility import scene_occluders, visibility_settings
@@ -270,6 +271,8 @@ def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,
     occluders = scene_occluders(config.geometry) if method.self_occlusion else None
     logger.info("nominal model: %s%s", describe_mesh(config.geometry.kind, model.mesh),
                 "" if occluders is None else f", {len(occluders)} occluder triangles")
+    if config.geometry.kind != "roi":            # an ROI is placed by the rig itself
+        placement_check(model.mesh, cameras, images)   # a loud warning if they disagree
     results = []
     for k, spec in enumerate(specs, start=1):
         logger.info("method %d of %d: %s ...", k, len(specs), spec.label)
