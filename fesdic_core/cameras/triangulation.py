@@ -140,7 +140,7 @@ def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray |
     px0, px1 : (n, 2) matched pixels (x = column, y = row).
     n_features : the features found in image 0 (inside the mask).
     """
-    sift = cv2.SIFT_create(nfeatures=int(max_features))
+    sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
     m0 = None if mask0 is None else np.asarray(mask0, bool).astype(np.uint8) * 255
     k0, d0 = sift.detectAndCompute(_gray8(values0), m0)
     k1, d1 = sift.detectAndCompute(_gray8(values1), None)

@@ -177,7 +177,7 @@ class GeometryConfig:
     polygon_px: tuple | None = None
     exclude_px: tuple = ()
     mask: Path | None = None
-    surface: str = "plane"
+    surface: str | None = None        # kind = "roi": "plane" (its default) or "quadric"
 
     @property
     def roi(self) -> RoiConfig | None:

@@ -46,7 +46,7 @@ class RoiConfig:
         polygon = geometry.polygon_px
         return cls(polygon=None if polygon is None else np.array(polygon, dtype=float),
                    exclude=tuple(np.array(p, dtype=float) for p in geometry.exclude_px),
-                   mask=geometry.mask, surface=geometry.surface)
+                   mask=geometry.mask, surface=geometry.surface or "plane")
 
 
 def _polygon(value: Any) -> np.ndarray:

@@ -332,3 +332,17 @@ def test_the_part_of_the_roi_camera_1_does_not_see_is_measured_and_left_out():
     assert truth > 0.005 and abs(r.unseen_share - truth) < 0.1 * truth, (r.unseen_share, truth)
     p = r.cameras[1].project(r.model.mesh.nodes)                     # the mesh: all in view
     assert p[:, 0].min() >= 2 and p[:, 0].max() <= 317
+
+
+def test_an_roi_configuration_written_back_by_the_report_reads_again(noise_folder):
+    from georeg_app.report.provenance import config_toml
+    config = load_config(_config(noise_folder, "polygon_px = [[10, 10], [100, 10], [100, 90]]\n"
+                                               "exclude_px = [[[40, 20], [60, 20], [60, 40]]]\n"
+                                               'surface = "quadric"'))
+    again = noise_folder / "again.toml"
+    again.write_text(config_toml(config))
+    assert load_config(again).geometry == config.geometry
+    assert config.geometry.roi.exclude[0].shape == (3, 2) and config.geometry.roi.surface == "quadric"
+    plain = load_config(_config(noise_folder, "polygon_px = [[10, 10], [100, 10], [100, 90]]",
+                                name="plain.toml"))
+    assert plain.geometry.roi.surface == "plane"
