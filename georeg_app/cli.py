@@ -227,8 +227,8 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     Bad input (a frame of another size, counts that differ between the cameras, a missing
     file, a reference folder that lacks a file) is one error line naming it, exit status 1 and
     nothing written. A frame that fails its checks is marked in summary.json and left out of
-    ``displacement.pvd``; the command fails (status 1, nothing written) only when every frame
-    failed.
+    ``displacement.pvd``; the command fails (status 1) only when every frame failed, and then
+    writes the outputs all the same, for inspection.
     """
     from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE
     from georeg_app.series.track import run_track
@@ -240,12 +240,15 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     check_output_folder(out, args.overwrite)                                  # before computing
     config = config.with_output_dir(out)
     run = SeriesRun(run_track(config, scheduler, progress, workers=args.workers))
-    run.check()                                   # MeasurementFailed: every frame failed
     failed = [f for f in run.frames if not f.ok]
     if failed:
         logger.warning("%d of %d frames failed (marked in %s): %s", len(failed), len(run.frames),
-                       SUMMARY_FILE, ", ".join(str(f.index) for f in failed))
-    run.save(out, overwrite=args.overwrite)
+                       SUMMARY_FILE, ", ".join(f"{f.index} ({Path(f.cam0).name})" for f in failed))
+    run.save(out, overwrite=args.overwrite)       # failed frames too: something to inspect
+    try:
+        run.check()                               # MeasurementFailed: every frame failed
+    except MeasurementFailed as err:
+        raise MeasurementFailed(f"{err} (the failed frames are written to {out})") from None
     return Path(out) / REPORT_FILE
 
 
