@@ -94,7 +94,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["METHOD_NAMES", "AUTO", "integer_or_auto", "lengths_or_auto", "GEOMETRY_KINDS",
            "NORMALISATIONS", "DEFAULT_TIKHONOV_LENGTHS_MM", "DEFAULT_OUTPUT_DIR",
            "ImagesConfig", "Landmark", "CAMERA_SOURCES", "CamerasConfig", "GeometryConfig",
-           "MethodConfig", "OutputConfig", "Config", "load_config"]
+           "MethodConfig", "OutputConfig", "Config", "load_config",
+           "ConfigError", "ConfigFileNotFoundError", "images_table", "cameras_table", "geometry_table", "method_table", "output_table"]
 
 METHOD_NAMES = ("fe", "tikhonov", "georeg")
 #: the value of ``levels`` and of a Tikhonov length chosen from the data
@@ -216,7 +217,8 @@ class Config:
 
 # --------------------------------------------------------------------------- sections
 
-def _images(data: Any, source: Path, base: Path) -> ImagesConfig:
+def images_table(data: Any, source: Path, base: Path) -> ImagesConfig:
+    """The ``[images]`` table ``data`` (read from ``source``, paths relative to ``base``), checked."""
     t = Table(data, "[images]", source)
     cam0 = t.take("cam0", string, "a file path (string)", required=True)
     cam1 = t.take("cam1", string, "a file path (string)", required=True)
@@ -239,7 +241,8 @@ def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
     return tuple(out)
 
 
-def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
+def cameras_table(data: Any, top_landmarks: Any, source: Path, base: Path) -> CamerasConfig:
+    """The ``[cameras]`` table (and the top-level ``[[landmarks]]``), checked: one calibration source."""
     t = Table(data, "[cameras]", source)
     paths = {key: t.take(key, string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
@@ -265,7 +268,8 @@ _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
                   "mesh": {"file"}, "cad": {"file"}}
 
 
-def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
+def geometry_table(data: Any, source: Path, base: Path) -> GeometryConfig:
+    """The ``[geometry]`` table, checked against its ``kind``'s keys."""
     t = Table(data, "[geometry]", source)
     kind = t.take("kind", string, "a string", required=True)
     if kind not in GEOMETRY_KINDS:
@@ -314,7 +318,8 @@ def _face_list(value: Any) -> tuple:
     return tuple(value)
 
 
-def _method(data: Any, source: Path) -> MethodConfig:
+def method_table(data: Any, source: Path) -> MethodConfig:
+    """The ``[method]`` table, checked (defaults for the keys it lacks)."""
     t = Table(data, "[method]", source)
     d = MethodConfig()
     m = MethodConfig(
@@ -355,7 +360,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
     return m
 
 
-def _output(data: Any, source: Path, base: Path) -> OutputConfig:
+def output_table(data: Any, source: Path, base: Path) -> OutputConfig:
+    """The ``[output]`` table, checked (``dir`` relative to ``base``)."""
     t = Table(data, "[output]", source)
     out = t.take("dir", string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
     t.finish()
@@ -383,11 +389,11 @@ def load_config(path: str | os.PathLike) -> Config:
     method = top.take("method", lambda v: v, "a table", default={})
     output = top.take("output", lambda v: v, "a table", default={})
     top.finish()
-    config = Config(images=_images(images, source, base),
-                    cameras=_cameras(cameras, landmarks, source, base),
-                    geometry=_geometry(geometry, source, base),
-                    method=_method(method, source),
-                    output=_output(output, source, base),
+    config = Config(images=images_table(images, source, base),
+                    cameras=cameras_table(cameras, landmarks, source, base),
+                    geometry=geometry_table(geometry, source, base),
+                    method=method_table(method, source),
+                    output=output_table(output, source, base),
                     source=source.resolve())
     logger.debug("configuration %s: %s", source, config)
     return config
