@@ -194,11 +194,11 @@ def effective_variance(state, kappa: float, finest_step: np.ndarray | None, fine
 
 
 def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray,
-             scale: int, hold: bool = False) -> np.ndarray:
+             scale: int, hold: bool = True) -> np.ndarray:
     """The step from ``q`` to the optimum of ``level`` by the Gauss-Newton model (Eq. 8):
     ``G_s (b + H q) - q`` with ``G_s = C_s^T (C_s H C_s^T)^-1 C_s`` (Eqs. 18-21). For a level
     that holds ``q`` (finer, nested: Eq. 13) it is the level's Gauss-Newton step ``G_s b``.
-    ``hold``: dofs that no point sees keep their value (a part's hidden regions)."""
+    ``hold``: dofs that no point sees keep their value (outside the outline, hidden regions)."""
     solver = GeometricRegularization(space, {scale: level}, hold_unseen=hold)
     return solver.solve(H, b + H @ q, q, scale) - q
 
@@ -230,12 +230,12 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     finest = settings.scales[-1]
     start = max(0, n_levels - int(start_levels))
     schedule = {s: min(start + s - finest, n_levels - 1) for s in settings.scales}
-    first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule, hold_unseen=model.is_part),
+    first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule),
                     settings, progress=progress)
     t0 = time.perf_counter()
     if first.state is None or first.noise is None or not np.all(np.isfinite(first.q)):
         logger.info("level search skipped: the start has no state to search from")
-        return first, GeometricRegularization(space, schedule, hold_unseen=model.is_part), LevelSearch(
+        return first, GeometricRegularization(space, schedule), LevelSearch(
             (), start, start, n_levels, float("nan"), 0.0)
     kappa = first.noise.variance
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
@@ -276,7 +276,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
             break
         best = min(better, key=lambda t: t.criterion)              # the best predicted level
         visited.add(best.level)
-        solver = GeometricRegularization(space, {finest: best.level}, hold_unseen=model.is_part)
+        solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
                                    cams, solver, finest, settings.normalisation, settings.max_iter,
                                    settings.tol_mm * 2.0 ** finest, extra_mask=mask,
@@ -292,7 +292,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         if measured.criterion >= current.criterion:
             break
         level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
-    solver = GeometricRegularization(space, {finest: level}, hold_unseen=model.is_part)
+    solver = GeometricRegularization(space, {finest: level})
     if level != start and not settings.calibrate:
         # the cameras are fixed: the search's last Gauss-Newton is the measurement at the
         # chosen level; the verdict and the uncertainty are the core's (conclude)
@@ -313,7 +313,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                                     scales=first.scales[:-1] + final.scales)
     else:
         final = dataclasses.replace(first, time_s=first.time_s + (time.perf_counter() - t0))
-        solver = GeometricRegularization(space, schedule, hold_unseen=model.is_part)
+        solver = GeometricRegularization(space, schedule)
     trials = [dataclasses.replace(t, chosen=t is current) for t in trials]
     search = LevelSearch(tuple(trials), level, start, n_levels, kappa,
                          final.time_s - first.time_s)
