@@ -44,7 +44,8 @@ def _outline(kind: str, length: float, width: float, elements: tuple[int, int]):
 def test_georeg_at_fixed_levels_on_an_outline_drops_the_outer_dofs_and_beats_fe(
         twisted_scene, kind):
     """Three levels of the rectangle's spline, the finest (6 x 6) at image scale 0. Measured:
-    L 4 dofs dropped, D 2 dropped and 4 slivers; error (no noise) well below FE's."""
+    L (288 elements) 4 dofs dropped, error 0.18 um against FE's 1.18 um; D (280 elements) 2
+    dropped and 6 slivers, 0.17 against 1.30 um."""
     specimen, cameras, images = twisted_scene
     model = _outline(kind, 60.0, 40.0, (24, 16))
     settings = MeasurementSettings(scales=(0,))
@@ -64,7 +65,9 @@ def test_georeg_at_fixed_levels_on_an_outline_drops_the_outer_dofs_and_beats_fe(
 
 @pytest.mark.slow
 def test_the_level_search_runs_on_an_outline(twisted_scene):
-    """``levels = "auto"``: the search climbs the levels of the L without a singular level."""
+    """``levels = "auto"``: the search weighs the levels of the L without a singular level and
+    counts only their seen dofs (the spline of the FE mesh: 372 of 468). Measured: the
+    coarsest level (the twist is bilinear), 0.09 um."""
     specimen, cameras, images = twisted_scene
     model = _outline("L", 60.0, 40.0, (24, 16))
     fe = measure(model.mesh, images, cameras, None, MeasurementSettings(scales=(0,)))
@@ -72,6 +75,10 @@ def test_the_level_search_runs_on_an_outline(twisted_scene):
                                               MeasurementSettings(scales=(1, 0)), start_levels=2)
     assert geo.ok, geo.failure
     assert solver.level(0) == search.chosen and solver.supports
+    finest = [t for t in search.as_dict()["trials"] if t["level"] == 0]
+    seen = int(np.count_nonzero(mesh_seen(solver.space.operators[0])))
+    assert finest and seen < solver.space.operators[0].shape[0]
+    assert all(t["dofs"] <= seen for t in finest)
     geo_error = rms(bounded_shape_error(geo.nodes, specimen))
     assert geo_error <= rms(bounded_shape_error(fe.nodes, specimen))
 
