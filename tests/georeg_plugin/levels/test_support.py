@@ -141,3 +141,36 @@ def test_a_displacement_level_names_the_component_of_its_dof(l_space):
     assert text.startswith("control point 7 at ") and text.endswith("component 2")
     point = space.patch(0).control_points.reshape(-1, 3)[7]
     assert str(np.round(point, 3).tolist()) in text
+
+
+@pytest.mark.slow
+def test_a_curved_vector_space_on_an_outline_keeps_only_the_seen_directions():
+    """The vector formulation (a doubly curved 40 x 30 mm patch) on an L of its Q9 mesh: each
+    level's operator is a basis of the range on the L's nodes, so the directions outside the
+    outline are not dofs at all (rank below 3 x the control points), the levels stay nested
+    and the default solve needs no drop."""
+    from georeg_plugin.spline.patch import SplinePatch
+    from georeg_plugin.spline.refine import refine_uniform
+    U, V = np.meshgrid(np.linspace(-20, 20, 3), np.linspace(-15, 15, 3), indexing="ij")
+    k = np.array([0, 0, 0, 1, 1, 1.0])
+    coarse = SplinePatch((2, 2), (k, k), np.stack([U, V, 0.004 * U ** 2 + 0.006 * V ** 2], -1))
+    fine = refine_uniform(coarse, 3)[0]
+    fe = fe_mesh_from_spline(fine, "Q9")
+    centres = fe.uv[fe.connectivity[:, 8]]
+    used = np.unique(fe.connectivity[~((centres[:, 0] > 0.5) & (centres[:, 1] > 0.5))])
+    uv = fe.uv[used]
+    space = multilevel_space(coarse, 3, fe.nodes[used], node_normals=fine.normals(uv), uv=uv)
+    full = multilevel_space(coarse, 3, fe.nodes, node_normals=fine.normals(fe.uv), uv=fe.uv)
+    assert space.operators[0].shape[0] < full.operators[0].shape[0]
+    for s in range(2):
+        fine_op, coarse_op = space.operators[s].toarray(), space.operators[s + 1].toarray()
+        coeffs, *_ = np.linalg.lstsq(fine_op.T, coarse_op.T, rcond=None)
+        assert np.abs(fine_op.T @ coeffs - coarse_op.T).max() < 1e-8
+    rng = np.random.default_rng(9)
+    H, b = _spd(space.n_fe, rng), rng.standard_normal(space.n_fe)
+    reg = GeometricRegularization(space)
+    d = reg.solve(H, b, np.zeros(space.n_fe), 0)
+    C = space.operators[0].toarray()
+    assert_allclose(d, C.T @ np.linalg.solve(C @ H.toarray() @ C.T, C @ b), rtol=1e-8,
+                    atol=1e-10 * np.abs(d).max())
+    assert reg.dropped_dofs[0] == 0
