@@ -348,7 +348,9 @@ def measured_spline_std(solver: GeometricRegularization, H, variance: float, lev
     """Standard deviation (mm) of the measured spline's control values (Eq. 21):
     ``q_s = (C_s H C_s^T)^-1 C_s b`` has the covariance ``kappa (C_s H C_s^T)^-1`` under the
     noise model ``Cov(b) = kappa H`` of the core (before the gauge's projection of the
-    rigid modes). One value per control point, as :func:`measured_spline`'s values."""
+    rigid modes). One value per control point, as :func:`measured_spline`'s values. A dof
+    that the level dropped (outside the mesh's outline, seen by no point) is not measured:
+    its control value stays nominal (0) and its standard deviation here is 0."""
     space = solver.space
     inverse = solver.projected_inverse(H, level)        # zero on the dofs the level dropped
     if space.vector:                    # d_J . n_J = t_J^T q_s: variance t_J^T H_s^-1 t_J

@@ -95,6 +95,28 @@ def test_dofs_unseen_in_the_images_are_dropped_and_counted_apart(l_space):
     assert np.all(np.isfinite(d))
 
 
+def test_levels_restricted_to_what_the_images_see_stay_nested_on_the_seen_nodes(l_space):
+    """H zero on a band of nodes (a region masked in the images): the dofs living only there
+    are dropped at each level; on the nodes the images see, every kept coarse function is a
+    combination of the kept fine ones (Eq. 13 on the data)."""
+    space, nodes = l_space
+    rng = np.random.default_rng(10)
+    band = (nodes[:, 0] < -12.0).astype(float)                     # the left 18 mm masked
+    mask = 1.0 - band
+    H = sps.csr_matrix(sps.diags(mask) @ _spd(space.n_fe, rng) @ sps.diags(mask))
+    reg = GeometricRegularization(space)
+    kept = []
+    for s in range(space.n_levels):
+        H_s, _ = reg.project(H, np.zeros(space.n_fe), s)
+        E, support = level_restriction(H_s, mesh_seen(space.operators[s]), s)
+        kept.append((E @ space.operators[s]).toarray()[:, mask == 1])
+        if s == 0:
+            assert support.unseen_images > 0
+    for s in range(space.n_levels - 1):
+        coeffs, *_ = np.linalg.lstsq(kept[s].T, kept[s + 1].T, rcond=None)
+        assert np.abs(kept[s].T @ coeffs - kept[s + 1].T).max() < 1e-10, s
+
+
 def test_a_seen_singular_dof_still_raises_naming_the_level_the_dof_and_where(l_space):
     """Two seen dofs the data cannot tell apart (H of rank one): an error, not a silent drop;
     the message names the level, the dof, its control point in mm and its Greville point."""
