@@ -6,7 +6,8 @@ subpackages named after the paper's pipeline (``fesdic_core.driver`` is now
 and gives the very module at its new path (``sys.modules`` holds one object under both
 names, so a monkeypatch through either is seen by both). The three old modules whose names
 are now packages (``fesdic_core.residual``, ``fesdic_core.shape``,
-``fesdic_core.displacement``) keep their public names through the packages' exports.
+``fesdic_core.displacement``, ``georeg_app.config``, ``georeg_app.report``) keep their public
+names through the packages' exports.
 Each package's ``__init__`` imports this module, which installs the finder once.
 """
 from __future__ import annotations
@@ -63,7 +64,6 @@ MOVED: dict[str, str] = {
     "georeg_plugin.solver": "georeg_plugin.levels.solver",
     "georeg_plugin.spline_io": "georeg_plugin.io.spline_io",
     "georeg_plugin.iges": "georeg_plugin.io.iges",
-    "georeg_app.config": "georeg_app.config.measure",
     "georeg_app.toml_schema": "georeg_app.config.toml_schema",
     "georeg_app.track_config": "georeg_app.config.track",
     "georeg_app.cad": "georeg_app.inputs.cad",
@@ -75,7 +75,6 @@ MOVED: dict[str, str] = {
     "georeg_app.track": "georeg_app.series.track",
     "georeg_app.track_dask": "georeg_app.series.dask",
     "georeg_app.track_outputs": "georeg_app.series.outputs",
-    "georeg_app.report": "georeg_app.report.html",
     "georeg_app.track_report": "georeg_app.report.track",
     "georeg_app.figures": "georeg_app.report.figures",
     "georeg_app.maps": "georeg_app.report.maps",

@@ -7,14 +7,14 @@
 """
 from adapters.errors import AdapterError, LevelMeshError
 from adapters.fesdic_core import (NominalModel, displacement_space, georeg_solver, measured_spline,
-                                  measured_spline_std, nominal_model, part_model)
+                                  keep_elements, measured_spline_std, nominal_model, part_model)
 from adapters.level_search import LevelSearch, measure_auto_levels
 from adapters.protocol import Adapter, LevelRecord, reduced_basis
 from adapters.pyxel import PyxelAdapter, correlate_multilevel
 
 __all__ = ["AdapterError", "LevelMeshError",
            "Adapter", "LevelRecord", "reduced_basis",
-           "NominalModel", "nominal_model", "part_model", "georeg_solver", "displacement_space",
+           "NominalModel", "nominal_model", "part_model", "keep_elements", "georeg_solver", "displacement_space",
            "measured_spline", "measured_spline_std",
            "LevelSearch", "measure_auto_levels",
            "PyxelAdapter", "correlate_multilevel"]

@@ -32,7 +32,7 @@ from georeg_plugin.spline.refine import refine_uniform, refine_to_elements
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["NominalModel", "nominal_model", "part_model", "georeg_solver", "displacement_space", "is_curved",
+__all__ = ["NominalModel", "nominal_model", "part_model", "keep_elements", "georeg_solver", "displacement_space", "is_curved",
            "measured_spline", "measured_spline_std",
            "multilevel_for_mesh", "check_nested_mesh"]
 
@@ -101,6 +101,30 @@ def nominal_model(patch: SplinePatch, elements: tuple[int, int] | int, family: s
     block = CellBlock(family=family_from_meshio(fe.cell_type), connectivity=fe.connectivity)
     return NominalModel(patch=patch, mesh=SurfaceMesh(nodes=fe.nodes, blocks=(block,), name=name),
                         uv=fe.uv)
+
+
+def keep_elements(model: NominalModel, keep: np.ndarray, name: str | None = None) -> NominalModel:
+    """The one-patch ``model`` with only the elements ``keep`` (n_elements,) bool: a mesh of
+    any outline (an L, a D, a cut-out) cut from the mesh of the patch's rectangle. The nodes
+    no kept element uses are removed (renumbered in their order); the spline levels of the
+    patch then have dofs outside the outline, which the solver removes
+    (:mod:`georeg_plugin.levels.support`)."""
+    if model.is_part or len(model.mesh.blocks) != 1:
+        raise ValueError("keep_elements: a one-patch model with one element block is needed")
+    block = model.mesh.blocks[0]
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != (len(block.connectivity),) or not keep.any():
+        raise ValueError(f"keep: ({len(block.connectivity)},) bool with at least one True "
+                         f"expected, got shape {keep.shape}")
+    connectivity = block.connectivity[keep]
+    used = np.unique(connectivity)
+    index = np.full(model.mesh.n_nodes, -1)
+    index[used] = np.arange(used.size)
+    mesh = SurfaceMesh(nodes=model.mesh.nodes[used],
+                       blocks=(CellBlock(family=block.family, connectivity=index[connectivity]),),
+                       name=name or model.mesh.name)
+    return dataclasses.replace(model, mesh=mesh,
+                               uv=None if model.uv is None else model.uv[used])
 
 
 def part_model(faces, refinements, names=None, family: str = "Q9",
@@ -291,12 +315,13 @@ def georeg_solver(model: NominalModel, n_levels: int, schedule: Mapping[int, int
     By default image scale ``s`` uses spline level ``s`` (coarse images, coarse splines:
     the paper's section 3.3), clipped to the coarsest level. ``curved``: see
     :func:`multilevel_for_mesh`; by default (None) the shape's formulation follows the
-    nominal (vector when it is not planar). On a part of several faces the spline dofs that
-    no integration point sees (a bar's flank beyond the grazing cut-off, a plate strip a
-    feature hides) keep their value (``hold_unseen``) instead of stopping the measurement.
+    nominal (vector when it is not planar). The spline dofs that no integration point sees
+    (outside a non-rectangular outline or in a cut-out of the mesh, a bar's flank beyond the
+    grazing cut-off, a plate strip a feature hides) are removed from their level and keep
+    their value (``hold_unseen``, :mod:`georeg_plugin.levels.support`); the solver's
+    ``dropped_dofs`` says how many each level lost.
     """
-    return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule,
-                                   hold_unseen=model.is_part)
+    return GeometricRegularization(multilevel_for_mesh(model, n_levels, curved), schedule=schedule)
 
 
 def measured_spline(solver: GeometricRegularization, q: np.ndarray, level: int = 0
@@ -323,10 +348,11 @@ def measured_spline_std(solver: GeometricRegularization, H, variance: float, lev
     """Standard deviation (mm) of the measured spline's control values (Eq. 21):
     ``q_s = (C_s H C_s^T)^-1 C_s b`` has the covariance ``kappa (C_s H C_s^T)^-1`` under the
     noise model ``Cov(b) = kappa H`` of the core (before the gauge's projection of the
-    rigid modes). One value per control point, as :func:`measured_spline`'s values."""
+    rigid modes). One value per control point, as :func:`measured_spline`'s values. A dof
+    that the level dropped (outside the mesh's outline, seen by no point) is not measured:
+    its control value stays nominal (0) and its standard deviation here is 0."""
     space = solver.space
-    H_s, _ = solver.project(H, np.zeros(space.n_fe), level)
-    inverse = np.linalg.inv(H_s.toarray())
+    inverse = solver.projected_inverse(H, level)        # zero on the dofs the level dropped
     if space.vector:                    # d_J . n_J = t_J^T q_s: variance t_J^T H_s^-1 t_J
         normals = np.vstack([p.control_normals() for p in space.level_patches(level)])
         T = space.vector[level].coefficients.reshape(len(normals), 3, -1)

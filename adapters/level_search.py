@@ -44,6 +44,7 @@ from georeg_plugin.levels.operators import MultilevelSpace, nested_space
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
                                             penalty_per_dof, predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
+from georeg_plugin.levels.support import ZERO_PIVOT, mesh_seen
 from georeg_plugin.spline.refine import insert_knots, refine_uniform
 
 from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
@@ -51,7 +52,7 @@ from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LevelSearch", "ladder", "measure_auto_levels"]
+__all__ = ["LevelSearch", "ladder", "measure_auto_levels", "seen_level_dofs"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,9 +162,21 @@ def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
                         model.uv, family=family)
 
 
+def seen_level_dofs(space: MultilevelSpace, level: int, H=None) -> int:
+    """The dofs of a level that the data sees (:mod:`georeg_plugin.levels.support`): its rows
+    of ``C_s`` not zero on the mesh and, given ``H`` (n_fe, n_fe), with a nonzero diagonal of
+    ``C_s H C_s^T``; the dofs the criterion counts (those outside the outline are not solved)."""
+    C = space.operators[level]
+    seen = mesh_seen(C)
+    if H is not None and seen.any():
+        diag = np.abs(np.asarray((C @ sps.csr_matrix(H)).multiply(C).sum(axis=1)).ravel())
+        seen &= diag > ZERO_PIVOT * diag[seen].max()
+    return int(np.count_nonzero(seen))
+
+
 def _trial(level: int, space: MultilevelSpace, chi_square: float, reference: tuple, variance: float,
-           residual_percent: float, measured: bool, n_points: int) -> LevelTrial:
-    dofs = space.operators[level].shape[0]
+           residual_percent: float, measured: bool, n_points: int, H=None) -> LevelTrial:
+    dofs = seen_level_dofs(space, level, H)
     return LevelTrial(level=level, dofs=dofs, chi_square=chi_square,
                       criterion=information_criterion(chi_square, dofs, variance, n_points),
                       residual_percent=residual_percent,
@@ -194,11 +207,11 @@ def effective_variance(state, kappa: float, finest_step: np.ndarray | None, fine
 
 
 def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray,
-             scale: int, hold: bool = False) -> np.ndarray:
+             scale: int, hold: bool = True) -> np.ndarray:
     """The step from ``q`` to the optimum of ``level`` by the Gauss-Newton model (Eq. 8):
     ``G_s (b + H q) - q`` with ``G_s = C_s^T (C_s H C_s^T)^-1 C_s`` (Eqs. 18-21). For a level
     that holds ``q`` (finer, nested: Eq. 13) it is the level's Gauss-Newton step ``G_s b``.
-    ``hold``: dofs that no point sees keep their value (a part's hidden regions)."""
+    ``hold``: dofs that no point sees keep their value (outside the outline, hidden regions)."""
     solver = GeometricRegularization(space, {scale: level}, hold_unseen=hold)
     return solver.solve(H, b + H @ q, q, scale) - q
 
@@ -230,12 +243,12 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     finest = settings.scales[-1]
     start = max(0, n_levels - int(start_levels))
     schedule = {s: min(start + s - finest, n_levels - 1) for s in settings.scales}
-    first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule, hold_unseen=model.is_part),
+    first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule),
                     settings, progress=progress)
     t0 = time.perf_counter()
     if first.state is None or first.noise is None or not np.all(np.isfinite(first.q)):
         logger.info("level search skipped: the start has no state to search from")
-        return first, GeometricRegularization(space, schedule, hold_unseen=model.is_part), LevelSearch(
+        return first, GeometricRegularization(space, schedule), LevelSearch(
             (), start, start, n_levels, float("nan"), 0.0)
     kappa = first.noise.variance
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
@@ -252,17 +265,17 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     trials, iterations, current, visited, kept = [], 0, None, {start}, None
     while True:
         # the optimum of every level (Eq. 21 at the level), predicted from the current system
-        moves = {other: _move_to(space, other, state.H, state.b, q, finest, model.is_part)
+        moves = {other: _move_to(space, other, state.H, state.b, q, finest)
                  for other in range(n_levels)}
         variance = effective_variance(state, kappa, moves[0],
-                                      space.operators[0].shape[0])
+                                      seen_level_dofs(space, 0, state.H))
         if current is None or current.variance != variance:
             current = _trial(level, space, state.chi_square, (), variance,
-                             state.residual.std_percent, True, state.n_points)
+                             state.residual.std_percent, True, state.n_points, state.H)
             trials.append(current)
         reference = (current.chi_square, current.dofs)
         predictions = [_trial(other, space, chi, reference, variance, residual_of(chi, state),
-                              False, state.n_points)
+                              False, state.n_points, state.H)
                        for other, d in moves.items() if other not in visited
                        for chi in [predicted_fit(state.chi_square, state.b, d, state.H)]]
         trials += predictions
@@ -276,7 +289,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
             break
         best = min(better, key=lambda t: t.criterion)              # the best predicted level
         visited.add(best.level)
-        solver = GeometricRegularization(space, {finest: best.level}, hold_unseen=model.is_part)
+        solver = GeometricRegularization(space, {finest: best.level})
         shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
                                    cams, solver, finest, settings.normalisation, settings.max_iter,
                                    settings.tol_mm * 2.0 ** finest, extra_mask=mask,
@@ -285,14 +298,15 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
                                        settings.normalisation, mask, residual=shape.residual)
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
-                          trial_state.residual.std_percent, True, trial_state.n_points)
+                          trial_state.residual.std_percent, True, trial_state.n_points,
+                          trial_state.H)
         trials.append(measured)
         logger.info("level search: level %d measured: residual %.4f%%, criterion %.6g, gain %.3g",
                     best.level, measured.residual_percent, measured.criterion, measured.gain)
         if measured.criterion >= current.criterion:
             break
         level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
-    solver = GeometricRegularization(space, {finest: level}, hold_unseen=model.is_part)
+    solver = GeometricRegularization(space, {finest: level})
     if level != start and not settings.calibrate:
         # the cameras are fixed: the search's last Gauss-Newton is the measurement at the
         # chosen level; the verdict and the uncertainty are the core's (conclude)
@@ -313,7 +327,7 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                                     scales=first.scales[:-1] + final.scales)
     else:
         final = dataclasses.replace(first, time_s=first.time_s + (time.perf_counter() - t0))
-        solver = GeometricRegularization(space, schedule, hold_unseen=model.is_part)
+        solver = GeometricRegularization(space, schedule)
     trials = [dataclasses.replace(t, chosen=t is current) for t in trials]
     search = LevelSearch(tuple(trials), level, start, n_levels, kappa,
                          final.time_s - first.time_s)

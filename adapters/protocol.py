@@ -47,6 +47,9 @@ class LevelRecord:
         Gauss-Newton iterations run by the host at this level.
     U : ndarray, (n_dof,)
         Displacement dof vector at the end of the level (host numbering).
+    dropped : int
+        Columns of the level's basis ``C_s^T`` removed because they are zero on the mesh's
+        nodes or no integration point sees them (the level restricted to the outline).
     """
 
     level: int
@@ -55,6 +58,7 @@ class LevelRecord:
     residual_std: float
     n_iterations: int
     U: np.ndarray
+    dropped: int = 0
 
 
 @runtime_checkable

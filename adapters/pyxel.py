@@ -43,13 +43,14 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from georeg_plugin.levels.operators import multilevel_space
+from georeg_plugin.levels.support import ZERO_PIVOT
 from georeg_plugin.spline.patch import SplinePatch
 
 from adapters.protocol import LevelRecord, reduced_basis
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["INTEGRATION_RULES", "PyxelAdapter", "independent_columns", "pyxel_basis", "project_on_basis", "spline_for_mesh",
+__all__ = ["INTEGRATION_RULES", "PyxelAdapter", "independent_columns", "seen_columns", "pyxel_basis", "project_on_basis", "spline_for_mesh",
            "correlate_multilevel", "correlate_fe", "import_pyxel"]
 
 #: integration rules of :class:`PyxelAdapter` (see the module docstring)
@@ -190,6 +191,20 @@ def spline_for_mesh(m: Any, margin: float = 0.0, degree: int = 2,
                          lo[1] + grev[1] * (hi[1] - lo[1]), indexing="ij")
     control = np.stack([gu, gv, np.zeros_like(gu)], axis=-1)
     return SplinePatch(degrees=(p, p), knots=knots, control_points=control)
+
+
+def seen_columns(B: sps.spmatrix, H=None) -> tuple[sps.csr_matrix, int]:
+    """The columns of a reduced basis ``B = C_s^T`` (n_dof, k) that the data sees, and how
+    many were dropped: a column zero on the mesh's nodes (a spline function outside the
+    outline) is unseen whatever the images; with the host's ``H`` (n_dof, n_dof), a column
+    with a zero diagonal of ``B^T H B`` (relative to the largest) is unseen in these images
+    (:mod:`georeg_plugin.levels.support`)."""
+    B = sps.csc_matrix(B)
+    keep = B.getnnz(axis=0) > 0
+    if H is not None and keep.any():
+        diag = np.asarray((sps.csr_matrix(H) @ B).multiply(B).sum(axis=0)).ravel()
+        keep &= np.abs(diag) > ZERO_PIVOT * np.abs(diag[keep]).max()
+    return B[:, np.flatnonzero(keep)].tocsr(), int(np.count_nonzero(~keep))
 
 
 def independent_columns(B: sps.csr_matrix, rtol: float = 1e-9) -> np.ndarray:
@@ -340,7 +355,10 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
     for k, scale in enumerate(scales):  # coarse to fine
         level = n_levels - 1 - k  # Eq. 28 numbering: 0 is the finest
         B = reduced_basis(space.operators[level], adapter.dof_layout[used], adapter.n_dof)
-        B = B[:, np.flatnonzero(B.getnnz(axis=0))].tocsr()  # functions seen by no node
+        B, dropped = seen_columns(B, adapter._scale(scale)[-1])
+        if dropped:
+            logger.info("spline level %d: %d of %d basis functions dropped (zero on the mesh "
+                        "or seen by no integration point)", level, dropped, B.shape[1] + dropped)
         keep = independent_columns(B)  # B^T H B must be regular
         if keep.size < B.shape[1]:
             logger.warning("spline level %d: %d of %d basis functions are linearly "
@@ -353,7 +371,8 @@ def correlate_multilevel(f: Any, g: Any, m: Any, cam: Any, patch_coarse: SplineP
                     "std %.3f gray levels after %d iterations", level, B.shape[1], scale,
                     residual_std, n_it)
         history.append(LevelRecord(level=level, image_scale=int(scale), n_basis=B.shape[1],
-                                   residual_std=residual_std, n_iterations=n_it, U=U.copy()))
+                                   residual_std=residual_std, n_iterations=n_it, U=U.copy(),
+                                   dropped=dropped))
     return U, history[-1].residual_std, tuple(history)
 
 

@@ -25,7 +25,7 @@ from typing import Any, Callable, NamedTuple
 from fesdic_core.cameras.rig import read_cameras_json
 
 from georeg_app.config.measure import Config, OutputConfig, load_config
-from georeg_app.config.track import (TrackConfig, _displacement, _reference, _series,
+from georeg_app.config.track import (TrackConfig, displacement_table, reference_table, series_table,
                                      load_track_config)
 from georeg_app.results import SeriesRun, ShapeRun, check_output_folder
 from georeg_app.shape.demo import Truth, demo_config
@@ -208,9 +208,9 @@ def _track_config(images, cameras, nominal, series, displacement, reference, opt
     if not isinstance(series, (list, tuple)) or len(series) != 2:
         raise ValueError(f"series: expected (cam0 frames, cam1 frames), two globs or lists of "
                          f"files, got {series!r}")
-    frames = _series(plain({"cam0": series[0], "cam1": series[1]}), Path("series"), base)
+    frames = series_table(plain({"cam0": series[0], "cam1": series[1]}), Path("series"), base)
     table = displacement if isinstance(displacement, dict) else {"method": displacement or "fe"}
-    disp = _displacement(plain(table), Path("displacement"))
+    disp = displacement_table(plain(table), Path("displacement"))
     method = method_config(options)
     image_config, loaded = images_config(images, method, base)
     if loaded is not None:
@@ -220,7 +220,7 @@ def _track_config(images, cameras, nominal, series, displacement, reference, opt
         if cameras is not None or nominal is not None:
             raise TypeError("track(): cameras and nominal are not used with reference= (the "
                             "reference folder holds the calibrated cameras and the surface)")
-        ref = _reference(plain({"dir": reference}), Path("reference"), base, disp.method)
+        ref = reference_table(plain({"dir": reference}), Path("reference"), base, disp.method)
         cams = geometry = None
     else:
         if cameras is None or nominal is None:

@@ -26,7 +26,7 @@ from fesdic_core.cameras.rig import write_cameras_json
 from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig,
-                                       MethodConfig, _cameras, _geometry, _images, _method)
+                                       MethodConfig, cameras_table, geometry_table, images_table, method_table)
 from georeg_app.config.toml_schema import ConfigError
 from georeg_app.inputs.cad import CAD_SUFFIXES
 
@@ -76,7 +76,7 @@ def images_config(images: Any, method: MethodConfig, base: Path
     ``[images]`` and, for arrays and Images, the loaded pair (else None: read by the run)."""
     pair = _pair(images, "images", "images")
     if all(_is_path(p) for p in pair):
-        return _images({"cam0": plain(pair[0]), "cam1": plain(pair[1])}, Path("images"), base), None
+        return images_table({"cam0": plain(pair[0]), "cam1": plain(pair[1])}, Path("images"), base), None
     loaded = []
     for k, item in enumerate(pair):
         if isinstance(item, Image):
@@ -157,7 +157,7 @@ def cameras_config(cameras: Any, base: Path, source: str | None = None,
         if source is None:
             resolved = path if path.is_absolute() else base / path
             source = camera_source(resolved) if resolved.is_file() else "file"
-        return _cameras({source: os.fspath(path)}, raw, Path("cameras"), base)
+        return cameras_table({source: os.fspath(path)}, raw, Path("cameras"), base)
     pair = _pair(cameras, "cameras", "cameras")
     for k, cam in enumerate(pair):
         if not isinstance(cam, Camera):
@@ -181,9 +181,9 @@ def geometry_config(nominal: Any, base: Path) -> GeometryConfig:
     elif not isinstance(nominal, dict):
         raise ConfigError(f"nominal: expected a [geometry]-like dict (kind = ...), a "
                           f"GeometryConfig or a mesh or CAD file, got {_short(nominal)}")
-    return _geometry(plain(nominal), Path("nominal"), base)
+    return geometry_table(plain(nominal), Path("nominal"), base)
 
 
 def method_config(options: dict, where: str = "method options") -> MethodConfig:
     """The ``[method]`` table of keyword options (None values left to their defaults)."""
-    return _method(plain({k: v for k, v in options.items() if v is not None}), Path(where))
+    return method_table(plain({k: v for k, v in options.items() if v is not None}), Path(where))

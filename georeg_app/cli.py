@@ -6,6 +6,7 @@
     georeg measure CONFIG.toml [--out DIR] [--overwrite]  # the method of [method]
     georeg compare CONFIG.toml [--out DIR] [--overwrite]  # FE, Tikhonov, georeg multi/monoscale
     georeg track   CONFIG.toml [--out DIR] [--overwrite] [--scheduler S]  # displacement series
+    georeg preview CONFIG.toml [--out DIR] [--overwrite]  # the set-up at a glance, no measuring
 
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
 tracebacks on error), ``--version``. A user error (bad input: a configuration, image,
@@ -49,6 +50,7 @@ __all__ = ["main", "build_parser", "progress_enabled", "check_output_folder", "c
 
 PROG = "georeg"
 DEFAULT_DEMO_OUT = "demo_out"
+DEFAULT_PREVIEW_OUT = "preview_out"
 EXIT_OK, EXIT_ERROR, EXIT_BUG, EXIT_INTERRUPTED = 0, 1, 70, 130   # 70: EX_SOFTWARE (sysexits.h)
 EPILOG = ("exit status: 0 done, 1 user error (one line 'georeg: error: ...'), 2 bad arguments, "
           f"{EXIT_BUG} a bug in georeg (traceback; please report it), {EXIT_INTERRUPTED} interrupted")
@@ -98,6 +100,14 @@ def build_parser() -> argparse.ArgumentParser:
                             'Dask cluster), or tcp://HOST:PORT (an existing Dask scheduler)')
     track.add_argument("--workers", type=int, default=None,
                        help="workers of a local Dask cluster (default: Dask's choice)")
+    preview = sub.add_parser("preview", help="the set-up at a glance, without measuring: the mesh "
+                                             "projected in both images, the landmarks")
+    preview.add_argument("config", type=Path, metavar="CONFIG.toml",
+                         help="configuration (TOML) of measure or compare")
+    preview.add_argument("--out", type=Path, default=Path(DEFAULT_PREVIEW_OUT),
+                         help=f"output folder (default: {DEFAULT_PREVIEW_OUT})")
+    preview.add_argument("--overwrite", action="store_true",
+                         help="replace the contents of a non-empty output folder")
     for p in sub.choices.values():
         _common(p, suppress=True)
     return parser
@@ -171,6 +181,8 @@ def _run(args: argparse.Namespace) -> Path:
     """Run a command; return the report's path."""
     if args.command == "track":
         return _run_track(args, progress_enabled(args.quiet))
+    if args.command == "preview":
+        return _run_preview(args)
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
@@ -227,8 +239,8 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     Bad input (a frame of another size, counts that differ between the cameras, a missing
     file, a reference folder that lacks a file) is one error line naming it, exit status 1 and
     nothing written. A frame that fails its checks is marked in summary.json and left out of
-    ``displacement.pvd``; the command fails (status 1, nothing written) only when every frame
-    failed.
+    ``displacement.pvd``; the command fails (status 1) only when every frame failed, and then
+    writes the outputs all the same, for inspection.
     """
     from georeg_app.series.outputs import REPORT_FILE, SUMMARY_FILE
     from georeg_app.series.track import run_track
@@ -240,13 +252,38 @@ def _run_track(args: argparse.Namespace, progress: bool) -> Path:
     check_output_folder(out, args.overwrite)                                  # before computing
     config = config.with_output_dir(out)
     run = SeriesRun(run_track(config, scheduler, progress, workers=args.workers))
-    run.check()                                   # MeasurementFailed: every frame failed
     failed = [f for f in run.frames if not f.ok]
     if failed:
         logger.warning("%d of %d frames failed (marked in %s): %s", len(failed), len(run.frames),
-                       SUMMARY_FILE, ", ".join(str(f.index) for f in failed))
-    run.save(out, overwrite=args.overwrite)
+                       SUMMARY_FILE, ", ".join(f"{f.index} ({Path(f.cam0).name})" for f in failed))
+    run.save(out, overwrite=args.overwrite)       # failed frames too: something to inspect
+    try:
+        run.check()                               # MeasurementFailed: every frame failed
+    except MeasurementFailed as err:
+        raise MeasurementFailed(f"{err} (the failed frames are written to {out})") from None
     return Path(out) / REPORT_FILE
+
+
+def _run_preview(args: argparse.Namespace) -> Path:
+    """Run ``georeg preview``; returns the path of the picture written."""
+    from georeg_app.inputs.preview import preview, preview_summary, write_preview
+
+    config = load_config(args.config)                                         # fail fast
+    check_output_folder(args.out, args.overwrite)
+    p = preview(config)
+    summary = preview_summary(p)
+    seen = summary["elements_seen_fraction"]
+    logger.info("%s mesh, %d %s elements, %d nodes: cam0 sees %.0f %%, cam1 %.0f %%, both %.0f %% "
+                "of the elements", summary["geometry"], summary["mesh"]["n_elements"],
+                summary["mesh"]["family"], summary["mesh"]["n_nodes"], 100 * seen["cam0"],
+                100 * seen["cam1"], 100 * seen["both"])
+    if summary["landmark_error_max_px"] is not None:
+        logger.info("landmarks: largest reprojection error %.2f px", summary["landmark_error_max_px"])
+    if seen["both"] < 1.0:
+        logger.warning("%.0f %% of the elements are not seen by both cameras (see preview.png)",
+                       100 * (1.0 - seen["both"]))
+    write_preview(args.out, p, overwrite=args.overwrite)
+    return Path(args.out) / "preview.png"
 
 
 def _error_line(err: BaseException) -> str:

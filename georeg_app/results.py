@@ -249,8 +249,9 @@ class SeriesRun:
 
     def save(self, folder: str | os.PathLike, overwrite: bool = False) -> list[Path]:
         """Write ``georeg track``'s output files into ``folder`` (all or nothing; see
-        :meth:`ShapeRun.save`)."""
-        self.check()
+        :meth:`ShapeRun.save`), failed frames too and even when every frame failed (their
+        untrusted fields and reasons are there to inspect; :meth:`check` says whether the
+        series counts as measured)."""
         check_output_folder(folder, overwrite, option="overwrite=True")
         return write_track(folder, self.run, overwrite=overwrite)
 

@@ -73,6 +73,7 @@ class FakeResult:
     status: str = "ok"
     failure: str | None = None
     shape_error_mm: np.ndarray | None = None
+    dropped_dofs: dict | None = None
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The drivers: fixed point of section 2.2 inside the multiscale loop of Remark 3.
 
 For each image scale ``s``, coarse to fine (the solution of scale ``s`` starts scale
-``s - 1``):
+``s - 1``)::
 
     repeat until (p, q) stagnate:                    (fixed point, section 2.2)
         p <- argmin_p j(S, p)      calibration, Eq. 6 (if asked)

@@ -19,8 +19,7 @@ A complete example (every key; optional keys show their default in parentheses):
     # opencv = "stereo.yml"       # OpenCV FileStorage (.yml/.xml/.json): K1 D1 K2 D2 R T
     # vic3d = "project.z3d"       # VIC-3D project (.z3d zip or its project.xml)
     # dice = "cal.xml"            # DICe camera-system XML
-                                  # all but `file`: the specimen pose comes from >= 4 landmarks
-                                  # (none with [geometry] kind = "roi"):
+                                  # all but `file`: >= 4 landmarks pose the specimen (not "roi"):
     # [[landmarks]]               # one table per landmark (also accepted: [[cameras.landmarks]])
     # xyz_mm = [-50.0, -25.0, 0.0]   # world point on the specimen (mm)
     # cam0_px = [812.3, 1040.8]      # where camera 0 sees it (x = column, y = row, px)
@@ -36,10 +35,8 @@ A complete example (every key; optional keys show their default in parentheses):
                                   # untrimmed B-spline faces, entity 128) or, with the
                                   # optional 'cad' extra, STEP (.step, .stp) or trimmed IGES
     # faces = [0, "lid"]          # kind = "cad" only: faces by index or name (default all)
-    # polygon_px = [[420, 310], [1500, 300], [1510, 900], [430, 905]]
-                                  # kind = "roi": the specimen drawn on camera 0's reference
-                                  # image, [x, y] px vertices (x = column, y = row); the rig's
-                                  # triangulation places it, no landmarks (georeg_app.inputs.roi)
+    # polygon_px = [[420, 310], [1500, 300], [1510, 900]]   # kind = "roi": the specimen on
+                                  # camera 0's image, [x, y] px (x = column), no landmarks
     # exclude_px = [[[900, 500], [1000, 500], [1000, 600]]]   # "roi": holes (default none)
     # mask = "roi.png"            # "roi": instead of the polygons, nonzero = specimen
     # surface = "plane"           # "roi": "plane" | "quadric" (z = f(x, y)) (default "plane")
@@ -103,7 +100,8 @@ logger = logging.getLogger(__name__)
 __all__ = ["METHOD_NAMES", "AUTO", "integer_or_auto", "lengths_or_auto", "GEOMETRY_KINDS",
            "NORMALISATIONS", "DEFAULT_TIKHONOV_LENGTHS_MM", "DEFAULT_OUTPUT_DIR",
            "ImagesConfig", "Landmark", "CAMERA_SOURCES", "CamerasConfig", "GeometryConfig",
-           "MethodConfig", "OutputConfig", "Config", "load_config"]
+           "MethodConfig", "OutputConfig", "Config", "load_config",
+           "ConfigError", "ConfigFileNotFoundError", "images_table", "cameras_table", "geometry_table", "method_table", "output_table"]
 
 METHOD_NAMES = ("fe", "tikhonov", "georeg")
 #: the value of ``levels`` and of a Tikhonov length chosen from the data
@@ -180,8 +178,7 @@ class GeometryConfig:
     surface: str | None = None        # kind = "roi": "plane" (its default) or "quadric"
 
     @property
-    def roi(self) -> RoiConfig | None:
-        """The region of interest of ``kind = "roi"`` (arrays), else None."""
+    def roi(self) -> RoiConfig | None:  # the region of interest of kind = "roi" (arrays)
         return RoiConfig.of(self) if self.kind == "roi" else None
 
 
@@ -234,7 +231,8 @@ class Config:
 
 # --------------------------------------------------------------------------- sections
 
-def _images(data: Any, source: Path, base: Path) -> ImagesConfig:
+def images_table(data: Any, source: Path, base: Path) -> ImagesConfig:
+    """The ``[images]`` table ``data`` (read from ``source``, paths relative to ``base``), checked."""
     t = Table(data, "[images]", source)
     cam0 = t.take("cam0", string, "a file path (string)", required=True)
     cam1 = t.take("cam1", string, "a file path (string)", required=True)
@@ -257,8 +255,10 @@ def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
     return tuple(out)
 
 
-def _cameras(data: Any, top_landmarks: Any, source: Path, base: Path,
-             roi: bool = False) -> CamerasConfig:
+def cameras_table(data: Any, top_landmarks: Any, source: Path, base: Path,
+                  roi: bool = False) -> CamerasConfig:
+    """The ``[cameras]`` table (and the top-level ``[[landmarks]]``), checked: one calibration
+    source (``roi``: for ``[geometry] kind = "roi"``, no landmarks)."""
     t = Table(data, "[cameras]", source)
     paths = {key: t.take(key, string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
@@ -287,7 +287,8 @@ _GEOMETRY_KEYS = {"rectangle": {"length_mm", "width_mm"},
                   "mesh": {"file"}, "cad": {"file"}, "roi": set()}
 
 
-def _geometry(data: Any, source: Path, base: Path) -> GeometryConfig:
+def geometry_table(data: Any, source: Path, base: Path) -> GeometryConfig:
+    """The ``[geometry]`` table, checked against its ``kind``'s keys."""
     t = Table(data, "[geometry]", source)
     kind = t.take("kind", string, "a string", required=True)
     if kind not in GEOMETRY_KINDS:
@@ -337,7 +338,8 @@ def _face_list(value: Any) -> tuple:
     return tuple(value)
 
 
-def _method(data: Any, source: Path) -> MethodConfig:
+def method_table(data: Any, source: Path) -> MethodConfig:
+    """The ``[method]`` table, checked (defaults for the keys it lacks)."""
     t = Table(data, "[method]", source)
     d = MethodConfig()
     m = MethodConfig(
@@ -378,7 +380,8 @@ def _method(data: Any, source: Path) -> MethodConfig:
     return m
 
 
-def _output(data: Any, source: Path, base: Path) -> OutputConfig:
+def output_table(data: Any, source: Path, base: Path) -> OutputConfig:
+    """The ``[output]`` table, checked (``dir`` relative to ``base``)."""
     t = Table(data, "[output]", source)
     out = t.take("dir", string, "a folder path (string)", default=DEFAULT_OUTPUT_DIR)
     t.finish()
@@ -406,12 +409,12 @@ def load_config(path: str | os.PathLike) -> Config:
     method = top.take("method", lambda v: v, "a table", default={})
     output = top.take("output", lambda v: v, "a table", default={})
     top.finish()
-    config = Config(images=_images(images, source, base),
-                    cameras=_cameras(cameras, landmarks, source, base,
-                                     roi=isinstance(geometry, dict) and geometry.get("kind") == "roi"),
-                    geometry=_geometry(geometry, source, base),
-                    method=_method(method, source),
-                    output=_output(output, source, base),
+    config = Config(images=images_table(images, source, base),
+                    cameras=cameras_table(cameras, landmarks, source, base,
+                                          roi=isinstance(geometry, dict) and geometry.get("kind") == "roi"),
+                    geometry=geometry_table(geometry, source, base),
+                    method=method_table(method, source),
+                    output=output_table(output, source, base),
                     source=source.resolve())
     logger.debug("configuration %s: %s", source, config)
     return config

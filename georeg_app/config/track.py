@@ -50,12 +50,13 @@ from typing import Any
 from fesdic_core.displacement.driver import JACOBIANS
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
-                                       OutputConfig, _cameras, _geometry, _images, _method)
+                                       OutputConfig, cameras_table, geometry_table, images_table, method_table)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                                            load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
-           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY"]
+           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY",
+           "series_table", "displacement_table", "reference_table"]
 
 DISPLACEMENT_METHODS = ("fe", "tikhonov", "georeg")
 DEFAULT_TRACK_DIR = "track_out"
@@ -142,7 +143,8 @@ def _frames(t: Table, key: str, value: Any, base: Path) -> tuple[Path, ...]:
     return tuple(paths)
 
 
-def _series(data: Any, source: Path, base: Path) -> SeriesConfig:
+def series_table(data: Any, source: Path, base: Path) -> SeriesConfig:
+    """The ``[series]`` table: the deformed pairs (globs or lists), checked."""
     t = Table(data, "[series]", source)
     raw0 = t.take("cam0", lambda v: v, "a glob or a list of paths", required=True)
     raw1 = t.take("cam1", lambda v: v, "a glob or a list of paths", required=True)
@@ -154,7 +156,8 @@ def _series(data: Any, source: Path, base: Path) -> SeriesConfig:
     return SeriesConfig(cam0, cam1)
 
 
-def _displacement(data: Any, source: Path) -> DisplacementConfig:
+def displacement_table(data: Any, source: Path) -> DisplacementConfig:
+    """The ``[displacement]`` table, checked (defaults for the keys it lacks)."""
     t = Table(data, "[displacement]", source)
     d = DisplacementConfig()
     c = DisplacementConfig(
@@ -176,7 +179,7 @@ def _displacement(data: Any, source: Path) -> DisplacementConfig:
     return c
 
 
-def _reference(data: Any, source: Path, base: Path, method: str) -> ReferenceConfig:
+def reference_table(data: Any, source: Path, base: Path, method: str) -> ReferenceConfig:
     """The reference folder and the files of its first method that is "ok"."""
     t = Table(data, "[reference]", source)
     folder = resolve_path(t.take("dir", string, "a folder path (string)", required=True), base)
@@ -225,26 +228,26 @@ def load_track_config(path: str | os.PathLike) -> TrackConfig:
     reference = top.take("reference", lambda v: v, "a table")
     output = top.take("output", lambda v: v, "a table", default={})
     top.finish()
-    disp = _displacement(displacement, source)
+    disp = displacement_table(displacement, source)
     if reference is None:
         for key, value in (("cameras", cameras), ("geometry", geometry)):
             if value is None:
                 raise top.error(key, "missing required section (or give [reference] dir = a "
                                      "`georeg measure` output folder)")
         roi = isinstance(geometry, dict) and geometry.get("kind") == "roi"
-        cams = _cameras(cameras, landmarks, source, base, roi=roi)
-        geom, ref = _geometry(geometry, source, base), None
+        cams = cameras_table(cameras, landmarks, source, base, roi=roi)
+        geom, ref = geometry_table(geometry, source, base), None
     else:
         for key, value in (("cameras", cameras), ("geometry", geometry), ("landmarks", landmarks)):
             if value is not None:
                 raise top.error(key, "not used with [reference] (the reference folder holds the "
                                      "calibrated cameras and the measured surface); remove it")
         cams = geom = None
-        ref = _reference(reference, source, base, disp.method)
+        ref = reference_table(reference, source, base, disp.method)
     out_table = Table(output, "[output]", source)
     out = out_table.take("dir", string, "a folder path (string)", default=DEFAULT_TRACK_DIR)
     out_table.finish()
-    return TrackConfig(images=_images(images, source, base), cameras=cams, geometry=geom,
-                       method=_method(method, source), series=_series(series, source, base),
+    return TrackConfig(images=images_table(images, source, base), cameras=cams, geometry=geom,
+                       method=method_table(method, source), series=series_table(series, source, base),
                        displacement=disp, reference=ref,
                        output=OutputConfig(resolve_path(out, base)), source=source.resolve())

@@ -9,6 +9,7 @@ drawn in the best-fit plane of the reference surface.
 from __future__ import annotations
 
 import base64
+from pathlib import Path
 import html
 
 import numpy as np
@@ -90,8 +91,8 @@ def maps_figure(run) -> bytes | None:
         ax.set_yticks([])
     for ax in axes[len(fields):]:
         ax.set_visible(False)
-    fig.suptitle(f"frame {frame.index} (the last that succeeded), in the best-fit plane of the "
-                 "reference surface", fontsize=10)
+    fig.suptitle(f"frame {frame.index}, {Path(frame.cam0).name} (the last that succeeded), in the "
+                 "best-fit plane of the reference surface", fontsize=10)
     return png(fig)
 
 
@@ -120,13 +121,13 @@ def _figure(png_bytes: bytes, caption: str) -> str:
 def track_report_html(run) -> str:
     """One self-contained page: the run, the frames' table and the figures."""
     d = run.config.displacement
-    failed = [f.index for f in run.frames if not f.ok]
+    failed = [f"{f.index} ({Path(f.cam0).name})" for f in run.frames if not f.ok]
     summary = (f"{len(run.frames)} frame(s) against the reference ({run.reference_label}); "
                f"{run.mesh.n_nodes} nodes; displacement method {d.method}, image scales "
                f"{list(d.scale_sequence)}, {'incremental' if d.incremental else 'each from rest'}; "
                f"scheduler {run.scheduler}; {run.time_s:.1f} s.")
     if failed:
-        summary += f" {len(failed)} frame(s) FAILED ({', '.join(map(str, failed))}): greyed out."
+        summary += f" {len(failed)} frame(s) FAILED ({', '.join(failed)}): greyed out."
     body = ["<h1>georeg track: displacement over a series of stereo pairs</h1>",
             f"<p>{html.escape(summary)}</p>", "<h2>Frames</h2>", _frames_table(run),
             "<h2>Figures</h2>",

@@ -1,12 +1,14 @@
 """Output files of ``georeg track``, all published together (:class:`OutputWriter`).
 
-- ``frame_NNNN.vtu`` per frame (NNNN = frame index, the reference being frame 0): the
-  reference surface (mm, world frame) with point data ``displacement_mm`` (3),
+- ``frame_NNNN_<image>.vtu`` per frame (NNNN = frame index, the reference being frame 0;
+  ``<image>`` the stem of the frame's camera-0 image, so that a file says which pair it
+  measures: ``frame_0006_GT4-0110_0.vtu``): the reference surface (mm, world frame) with point data ``displacement_mm`` (3),
   ``residual`` (percent of the reference images' dynamic range, root mean square of the two
   cameras at the nodes), ``strain_xx``, ``strain_yy``, ``strain_xy`` (surface Green-Lagrange
   in the local tangent frame, :mod:`fesdic_core.displacement.strain`). A frame that failed
-  its checks is written as ``frame_NNNN_failed.vtu`` (its untrusted field) and left out of
-  the time series.
+  its checks is written as ``frame_NNNN_<image>_failed.vtu`` (its untrusted field) and left
+  out of the time series. The outputs are written even when every frame failed (there is
+  then something to inspect; the command still exits with status 1).
 - ``displacement.pvd``: the ParaView time series of the frames that succeeded (time = frame
   index).
 - ``summary.json``: :func:`track_summary`.
@@ -15,6 +17,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -25,17 +28,26 @@ from fesdic_core.fe.mesh_io import write_mesh
 from georeg_app.report.track import REPORT_FILE, track_report_html
 from georeg_app.shape.outputs import OutputWriter, _json_ready
 
-__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "frame_file", "track_summary", "pvd_text", "write_track"]
+__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "image_stem", "frame_file", "track_summary", "pvd_text", "write_track"]
 
 SUMMARY_FILE = "summary.json"
 PVD_FILE = "displacement.pvd"
 
 
+def image_stem(path: str) -> str:
+    """A file-name stem from an image's path, case kept: ``"frames/GT4-0110_0.tif" ->
+    "GT4-0110_0"`` (characters other than letters, digits, ``.+-`` become ``_``)."""
+    stem = re.sub(r"[^A-Za-z0-9.+-]+", "_", Path(path).stem).strip("_.")
+    return stem or "image"
+
+
 def frame_file(frame) -> str | None:
-    """The VTU of a frame (None for a frame that raised before giving a field)."""
+    """The VTU of a frame, named after its index and its camera-0 image (None for a frame
+    that raised before giving a field)."""
     if frame.U is None:
         return None
-    return f"frame_{frame.index:04d}" + ("" if frame.ok else "_failed") + ".vtu"
+    return (f"frame_{frame.index:04d}_{image_stem(frame.cam0)}" + ("" if frame.ok else "_failed")
+            + ".vtu")
 
 
 def _finite(value) -> float | None:

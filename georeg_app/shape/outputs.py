@@ -226,8 +226,10 @@ def summary_dict(run) -> dict:
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
     "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
     "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
-    "levels_chosen", "regularization"}]}``, plus ``"specimen"`` (the frame and surface fit) for
-    ``[geometry] kind = "roi"``. ``status`` is "ok" or
+    "levels_chosen", "regularization", "dropped_dofs"}]}``, plus ``"specimen"`` (the frame and
+    surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs`` (georeg):
+    per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
+    "slivers"}`` (the dofs outside the mesh's outline or seen by no point), else null. ``status`` is "ok" or
     "failed" (``failure`` says why); a method that failed without any state has null
     measurement fields and no mesh file.
     """
@@ -250,6 +252,7 @@ def summary_dict(run) -> dict:
             "shape_bias_median_mm": None, "shape_bias_max_mm": None, "noise_variance": None,
             "levels_chosen": _levels_chosen(result),
             "regularization": getattr(result, "regularization", None),
+            "dropped_dofs": getattr(result, "dropped_dofs", None),
         }
         if m is not None:
             noise = getattr(m, "noise_percent", float("nan"))

@@ -56,7 +56,10 @@ class MethodResult:
     level choice; ``spline_std``: the standard deviation of the measured spline's control
     values (mm); ``regularization``: what the method chose (Tikhonov lengths per scale).
     A part of several faces (``[geometry] kind = "cad"``): ``spline`` is a tuple of patches
-    (one per face), ``element_face`` each element's face, ``face_names`` their names."""
+    (one per face), ``element_face`` each element's face, ``face_names`` their names.
+    ``dropped_dofs``: georeg's spline levels solved at, level -> the counts of
+    :class:`~georeg_plugin.levels.support.LevelSupport` (dofs outside the mesh's outline or
+    seen by no integration point, removed; slivers)."""
 
     spec: MethodSpec
     measurement: Measurement | None
@@ -73,6 +76,7 @@ class MethodResult:
     regularization: dict | None = None
     element_face: np.ndarray | None = None
     face_names: tuple = ()
+    dropped_dofs: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -230,6 +234,9 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
         if m.state is not None and m.noise is not None:
             spline_std = measured_spline_std(solver, m.state.H, m.noise.variance, level)
     chosen = getattr(solver, "chosen_lengths_mm", None)
+    supports = getattr(solver, "supports", None)
+    dropped = {str(level): v.as_dict() for level, v in sorted(supports.items())} \
+        if supports else None
     return MethodResult(spec=spec, measurement=m, mesh=model.mesh,
                         distance_to_bfp_mm=best_fit_plane_distance(m.nodes),
                         shape_rms_error_mm=rms, spline=spline, spline_values=values,
@@ -237,7 +244,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
                         shape_error_mm=errors, level_search=search, spline_std=spline_std,
                         regularization={"tikhonov_length_mm": {int(k): float(v) for k, v in
                                                                chosen.items()}} if chosen else None,
-                        element_face=model.element_face, face_names=model.face_names)
+                        element_face=model.element_face, face_names=model.face_names,
+                        dropped_dofs=dropped)
 
 
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,

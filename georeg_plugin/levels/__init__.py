@@ -10,6 +10,8 @@ from georeg_plugin.levels.operators import (extraction_operator, node_parameters
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
                                             penalty_per_dof, predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization, SingularProjectionError
+from georeg_plugin.levels.support import (LevelSupport, level_restriction, mesh_seen, dof_location,
+                                          SLIVER_RATIO)
 
 __all__ = ["componentwise", "component_levels", "RANK_RTOL", "vector_extraction", "range_basis",
            "is_flat", "vector_gluing", "VectorLevel", "vector_level", "PartMesh", "part_mesh",
@@ -17,4 +19,5 @@ __all__ = ["componentwise", "component_levels", "RANK_RTOL", "vector_extraction"
            "extraction_operator", "node_parameters", "MultilevelSpace", "multilevel_space",
            "nested_space", "NodesOutsidePatchError", "LevelTrial", "information_criterion",
            "noise_gain", "penalty_per_dof", "predicted_fit", "GeometricRegularization",
-           "SingularProjectionError"]
+           "SingularProjectionError", "LevelSupport", "level_restriction", "mesh_seen",
+           "dof_location", "SLIVER_RATIO"]

@@ -13,10 +13,15 @@ spline space of level ``s``:
 the schedule image scale -> spline level, so it is stateless: the spline control
 values of the current shape are recovered from ``q`` by ``control_values``.
 
-A spline dof that no integration point sees (its support lies in a hole of a legacy
-mesh, or in a region masked in the images) makes ``C_s H C_s^T`` singular: by default
-this is an error naming the dof; with ``hold_unseen=True`` such dofs (zero diagonal
-term) keep their value and the step is solved for the others.
+A spline dof that no integration point sees (its support lies outside the mesh's
+outline, in a cut-out or a hole, or in a region masked in the images) would make
+``C_s H C_s^T`` singular: by default (``hold_unseen=True``) such dofs are removed from the
+level and keep their value, and the dofs that see only a sliver of points are merged into a
+neighbour (:mod:`georeg_plugin.levels.support` says precisely what "unseen" and "sliver"
+mean, and why the levels stay nested). A level is then singular only when a SEEN dof is:
+the error names the level, the dof and where it lies. ``hold_unseen=False`` keeps the strict
+behaviour (any unseen dof is an error). What each level lost is logged and kept in
+:attr:`GeometricRegularization.supports` (:attr:`~GeometricRegularization.dropped_dofs`).
 """
 from __future__ import annotations
 
@@ -30,6 +35,8 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from georeg_plugin.errors import GeoregPluginError
+from georeg_plugin.levels.support import (SLIVER_RATIO, ZERO_PIVOT, LevelSupport, dof_location,
+                                          level_restriction, mesh_seen)
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from georeg_plugin.levels.operators import MultilevelSpace
@@ -38,8 +45,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["GeometricRegularization", "SingularProjectionError"]
 
-#: relative size below which a diagonal term of a projected matrix counts as zero
-_ZERO_PIVOT = 1e-12
+_ZERO_PIVOT = ZERO_PIVOT
 
 
 class SingularProjectionError(GeoregPluginError, np.linalg.LinAlgError):
@@ -59,8 +65,11 @@ def _sparse_solve(A: sps.spmatrix, b: np.ndarray, level: int, what: str,
     return _sparse_factor(A, level, what, hint)(b)
 
 
-def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint: str):
-    """The map ``b -> A^-1 b`` of :func:`_sparse_solve`, ``A`` factorized once."""
+def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint):
+    """The map ``b -> A^-1 b`` of :func:`_sparse_solve`, ``A`` factorized once. ``hint``: a
+    format string with ``{dof}``, or a callable ``dof -> str`` naming the dof."""
+    if isinstance(hint, str):
+        hint = hint.format
     A = sps.csc_matrix(A)
     diag = A.diagonal()
     scale = float(np.max(np.abs(diag))) if diag.size else 0.0
@@ -70,7 +79,7 @@ def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint: str):
         raise SingularProjectionError(
             f"{what} of spline level {level} is singular: {dead.size} of {diag.size} "
             f"spline dofs have a zero diagonal term (first: dof {int(dead[0])}); "
-            f"{hint.format(dof=int(dead[0]))}")
+            f"{hint(dof=int(dead[0]))}")
     advice = ("the spline level is too fine for the data (rank deficiency): use a "
               "coarser level at this scale")
     try:
@@ -86,7 +95,7 @@ def _sparse_factor(A: sps.spmatrix, level: int, what: str, hint: str):
         raise SingularProjectionError(
             f"{what} of spline level {level} ({A.shape[0]} dofs) is numerically "
             f"singular (pivot ratio {pivots[k] / pivots.max():.1e} at spline dof {dof}; "
-            f"{hint.format(dof=dof)}?); {advice}")
+            f"{hint(dof=dof)}?); {advice}")
 
     def solve(b: np.ndarray) -> np.ndarray:
         x = lu.solve(np.asarray(b, dtype=float))
@@ -116,13 +125,25 @@ class GeometricRegularization:
         Default ``level = min(scale, n_levels - 1)``: the coarsest images use the
         coarsest splines (Fig. 5).
     hold_unseen : bool
-        Keep the dofs with a zero diagonal term of ``C_s H C_s^T`` (seen by no
-        integration point) fixed instead of raising :class:`SingularProjectionError`.
+        True (default): remove from each level the dofs no integration point sees (a zero
+        row of ``C_s`` on the mesh, or a zero diagonal term of ``C_s H C_s^T``; they keep their
+        value) and merge the slivers (:mod:`georeg_plugin.levels.support`); False: any
+        unseen dof raises :class:`SingularProjectionError`.
+    sliver_ratio : float
+        :data:`~georeg_plugin.levels.support.SLIVER_RATIO`: the dofs counted as slivers.
+    merge_slivers : bool
+        Merge each sliver into a neighbour (off: the restricted system is only scaled by its
+        diagonal, which leaves the step unchanged; see :mod:`georeg_plugin.levels.support`).
     """
 
     space: "MultilevelSpace"
     schedule: Mapping[int, int] | None = None
-    hold_unseen: bool = False
+    hold_unseen: bool = True
+    sliver_ratio: float = SLIVER_RATIO
+    merge_slivers: bool = False
+    #: the last :class:`LevelSupport` of each level solved at (filled by ``factorize``)
+    _supports: dict = dataclasses.field(init=False, repr=False, compare=False,
+                                        default_factory=dict)
     #: ``C_s^T`` of each level, csr (set by ``__post_init__``)
     _transposed: tuple = dataclasses.field(init=False, repr=False, compare=False)
 
@@ -191,23 +212,66 @@ class GeometricRegularization:
         """
         return self.factorize(H, scale)(b, q)
 
+    @property
+    def supports(self) -> Mapping[int, LevelSupport]:
+        """Level -> what it kept of its dofs in the last step solved at it (read-only)."""
+        return MappingProxyType(dict(self._supports))
+
+    @property
+    def dropped_dofs(self) -> Mapping[int, int]:
+        """Level -> number of dofs it lost (unseen on the mesh or in the images)."""
+        return MappingProxyType({s: v.dropped for s, v in sorted(self._supports.items())})
+
+    def restriction(self, H_s: sps.spmatrix, level: int) -> sps.csr_matrix:
+        """``E`` (m_kept, m) restricting level ``level`` to its seen dofs, slivers merged
+        (:func:`~georeg_plugin.levels.support.level_restriction`); the identity with
+        ``hold_unseen=False``. Records and logs the level's :class:`LevelSupport`."""
+        m = H_s.shape[0]
+        if not self.hold_unseen:
+            return sps.identity(m, format="csr")
+        E, support = level_restriction(H_s, mesh_seen(self.operator(level)), level,
+                                       self.sliver_ratio, self.merge_slivers)
+        if self._supports.get(level) != support and (support.dropped or support.slivers):
+            logger.info("spline level %d: %d of %d dofs dropped (%d outside the mesh, %d that no "
+                        "integration point sees), %d slivers %s", level,
+                        support.dropped, m, support.unseen_mesh, support.unseen_images,
+                        support.slivers, "merged into a neighbour" if self.merge_slivers
+                        else "(diagonally scaled)")
+        self._supports[level] = support
+        return E
+
+    def _describer(self, E: sps.csr_matrix, level: int) -> Callable[[int], str]:
+        """``reduced dof -> text`` naming the level's dof and where it lies."""
+        first = np.asarray(E.indices)[E.indptr[:-1]] if E.nnz else np.zeros(0, dtype=int)
+
+        def describe(dof: int) -> str:
+            full = int(first[dof]) if dof < first.size else dof
+            where = dof_location(self.space, level, full)
+            return f"spline dof {full}" + (f" ({where})" if where else "")
+        return describe
+
     def factorize(self, H, scale: int) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
         """The step's map ``(b, q) -> C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21) with
-        ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change."""
+        ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change.
+        With ``hold_unseen`` the level is first restricted to its seen dofs (``E``):
+        ``C_s^T E^T (E C_s H C_s^T E^T)^-1 E C_s b``."""
         s = self.level(scale)
         C, CT = self.operator(s), self._transposed[s]
         H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
-        seen = np.ones(H_s.shape[0], dtype=bool)
-        if self.hold_unseen:                                   # dofs no point sees keep their value
-            seen = _seen_dofs(H_s)
-            if not seen.all():
-                logger.debug("level %d: %d of %d spline dofs unseen, held", s,
-                             np.count_nonzero(~seen), seen.size)
-                H_s = H_s[seen][:, seen]
-        solve = _sparse_factor(H_s, s, "projected Hessian C_s H C_s^T",
-                               "no integration point sees spline dof {dof}") \
-            if seen.any() else None
-        logger.debug("scale %d -> spline level %d: %d dofs", scale, s, seen.size)
+        E = self.restriction(H_s, s)
+        H_r = sps.csr_matrix(E @ H_s @ E.T)
+        # symmetric diagonal (Jacobi) scaling: the same step, but the slivers' tiny diagonals no
+        # longer spoil the conditioning (6.6e6 -> 1.3e2 on a D outline, support.py)
+        h = np.abs(H_r.diagonal())
+        jacobi = 1.0 / np.sqrt(np.where(h > 0, h, 1.0)) if self.hold_unseen else np.ones(h.size)
+        J = sps.diags(jacobi)
+        describe = self._describer(E, s)
+        factor = _sparse_factor(J @ H_r @ J, s, "projected Hessian C_s H C_s^T",
+                                lambda dof: f"no integration point sees {describe(dof)}") \
+            if E.shape[0] else None
+        solve = None if factor is None else (lambda rhs: jacobi * factor(jacobi * rhs))
+        logger.debug("scale %d -> spline level %d: %d of %d dofs", scale, s, E.shape[0],
+                     C.shape[0])
 
         def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
             b = np.asarray(b, dtype=float)
@@ -215,11 +279,22 @@ class GeometricRegularization:
                 raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
                                  f"spline level {s}")
             b_s = C @ b                                                # Eq. 19
-            d_s = np.zeros(seen.size)
+            d_s = np.zeros(C.shape[0])
             if solve is not None:
-                d_s[seen] = solve(b_s[seen])
+                d_s = E.T @ solve(E @ b_s)
             return CT @ d_s                                            # Eq. 21
         return step
+
+    def projected_inverse(self, H, level: int) -> np.ndarray:
+        """``E^T (E C_s H C_s^T E^T)^-1 E`` (m, m), dense: the inverse of the projected
+        Hessian on the level's seen dofs, zero on the dropped ones (m small)."""
+        H_s, _ = self.project(H, np.zeros(self.space.n_fe), level)
+        E = self.restriction(H_s, level)
+        M = np.zeros(H_s.shape)
+        if E.shape[0]:
+            Ed = E.toarray()
+            M = Ed.T @ np.linalg.inv((E @ H_s @ E.T).toarray()) @ Ed
+        return M
 
     def step_covariance(self, H,
                         scale: int) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
@@ -227,10 +302,7 @@ class GeometricRegularization:
         to ``Cov(b) = H``): its diagonal (n_fe,) and its action ``V (n_fe, k) -> C V``."""
         s = self.level(scale)
         C, CT = self.operator(s), self._transposed[s]
-        H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
-        seen = _seen_dofs(H_s) if self.hold_unseen else np.ones(H_s.shape[0], dtype=bool)
-        M = np.zeros(H_s.shape)
-        M[np.ix_(seen, seen)] = np.linalg.inv(H_s[seen][:, seen].toarray())   # m x m, m small
+        M = self.projected_inverse(H, s)                                        # m x m, m small
         CT_M = np.asarray(CT @ M)                                               # (n_fe, m)
         diag = np.asarray(CT.multiply(CT_M).sum(axis=1)).ravel()                # rows of C^T M C
         return diag, lambda V: CT_M @ (C @ np.asarray(V, dtype=float))
@@ -260,8 +332,16 @@ class GeometricRegularization:
         q = np.asarray(q, dtype=float)
         if q.shape != (C.shape[1],):
             raise ValueError(f"q has shape {q.shape}, expected ({C.shape[1]},)")
-        return _sparse_solve(C @ C.T, C @ q, level, "Gram matrix C_s C_s^T",
-                             "no FE node depends on spline dof {dof}")
+        if not self.hold_unseen:
+            return _sparse_solve(C @ C.T, C @ q, level, "Gram matrix C_s C_s^T",
+                                 "no FE node depends on spline dof {dof}")
+        rows = mesh_seen(C)                         # the dofs outside the mesh keep 0
+        q_s = np.zeros(C.shape[0])
+        if rows.any():
+            Ck = C[rows]
+            q_s[rows] = _sparse_solve(Ck @ Ck.T, Ck @ q, level, "Gram matrix C_s C_s^T",
+                                      "no FE node depends on spline dof {dof}")
+        return q_s
 
     def to_nodes(self, q_s: np.ndarray, level: int) -> np.ndarray:
         """Nodal field ``q = C_s^T q_s`` (Eq. 21), (n_fe,)."""

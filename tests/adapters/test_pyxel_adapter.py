@@ -208,3 +208,23 @@ def test_iteration_count_is_maxiter_when_convergence_is_impossible(speckle_pair,
         _, _, n_iterations = host.correlate(None, None, 1)
     assert n_iterations == 4
     assert any("maxiter = 4" in r.getMessage() for r in caplog.records)
+
+
+def test_basis_columns_no_data_sees_are_dropped():
+    """B = C_s^T restricted to the outline: a column zero on the mesh (a spline function
+    outside it) goes whatever H; with H, a column that no integration point sees goes too."""
+    rng = np.random.default_rng(8)
+    B = sps.random(30, 8, density=0.4, random_state=9, format="lil")
+    B[:, 2] = 0.0                                      # outside the mesh
+    B[:, 5] = 0.0
+    B[25:, 5] = 1.0                                    # lives on dofs 25-29 only
+    B = sps.csr_matrix(B)
+    kept, dropped = adapter.seen_columns(B)
+    assert kept.shape == (30, 7) and dropped == 1
+    w = np.r_[np.ones(25), np.zeros(5)]                # no point sees dofs 25-29
+    A = rng.standard_normal((30, 30))
+    H = sps.csr_matrix(np.diag(w) @ (A @ A.T) @ np.diag(w))
+    kept, dropped = adapter.seen_columns(B, H)
+    expected = [c for c in range(8) if np.abs(B[:25, c].toarray()).sum() > 0]
+    assert dropped == 8 - len(expected) >= 2
+    np.testing.assert_array_equal(kept.toarray(), B[:, expected].toarray())

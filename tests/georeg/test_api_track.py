@@ -90,4 +90,4 @@ def test_track_saves_the_files_of_georeg_track_and_each_frame_as_meshio(series, 
 def test_track_toml_file(series, tmp_path):
     run = georeg.track(series / "track.toml", out=tmp_path / "out")
     assert run.ok and (tmp_path / "out" / "displacement.pvd").is_file()
-    assert run.summary["frames"][1]["mesh_file"] == "frame_0002.vtu"
+    assert run.summary["frames"][1]["mesh_file"] == "frame_0002_f2_cam0.vtu"

@@ -177,6 +177,36 @@ def test_sizes_beyond_the_images_are_refused_before_computing(case, tmp_path, ca
     _fails_naming(capsys, config, tmp_path / "out", message)
 
 
+@pytest.mark.slow
+def test_georeg_on_an_l_shaped_mesh_file_reports_the_dofs_each_level_dropped(case, tmp_path, capsys):
+    """Issue 22: an L-shaped legacy mesh (a 24 x 16 Q4 mesh of the 60 x 40 mm plate without
+    its quadrant x > 0, y > 0); its spline is the bounding rectangle's, whose 3 levels have
+    dofs outside the L (4 of 36 at level 0, 1 of 16 at level 1). Before: a singular level,
+    exit 1. Now: exit 0, the summary says what each level dropped, the shape is right."""
+    from fesdic_core.fe.mesh import CellBlock, SurfaceMesh
+    folder, specimen, _, _ = case
+    full = rectangle_mesh(60.0, 40.0, 24, 16, "Q4")
+    block = full.blocks[0]
+    centres = full.nodes[block.connectivity].mean(axis=1)
+    connectivity = block.connectivity[~((centres[:, 0] > 0.0) & (centres[:, 1] > 0.0))]
+    used, inverse = np.unique(connectivity, return_inverse=True)
+    mesh = SurfaceMesh(nodes=full.nodes[used], name="L", blocks=(CellBlock(
+        family=block.family, connectivity=inverse.reshape(connectivity.shape)),))
+    write_mesh(tmp_path / "l.vtu", mesh)
+    config = _config(folder, "l.toml", geometry=f'kind = "mesh"\nfile = "{tmp_path / "l.vtu"}"')
+    config.write_text(config.read_text().replace("levels = 2", "levels = 3"))
+    out = tmp_path / "out"
+    assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 0
+    (method,) = json.loads((out / "summary.json").read_text())["methods"]
+    dropped = {level: v["dropped"] for level, v in method["dropped_dofs"].items()}
+    assert dropped == {"0": 4, "1": 1}, method["dropped_dofs"]
+    assert method["dropped_dofs"]["0"]["n_dofs"] == 36
+    assert method["levels_chosen"] == {"fixed_levels": 3, "chosen_level": 0}
+    vtu = meshio.read(out / method["mesh_file"])
+    error = shape_error_to_surface(vtu.points, specimen)
+    assert np.sqrt(np.mean(error ** 2)) < 0.01, np.sqrt(np.mean(error ** 2))
+
+
 def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
     """A 6 x 4 Q4 mesh file (35 nodes) cannot carry 4 spline levels (100 dofs at the finest)."""
     folder = case[0]

@@ -91,19 +91,20 @@ def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, 
         assert all(key in f for f in frames)
     for frame, motion in zip(frames, MOTIONS):
         if motion is None:
-            assert frame["mesh_file"] == "frame_0003_failed.vtu"
+            assert frame["mesh_file"] == "frame_0003_f3_cam0_failed.vtu"  # named after its image
             continue
         data = _point_data(out / frame["mesh_file"])
         rms = np.sqrt(np.mean((data["displacement_mm"] - motion(mesh.nodes)) ** 2, axis=0))
         assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{frame['mesh_file']}: {1e3 * rms} um"
         assert {"residual", "strain_xx", "strain_yy", "strain_xy"} <= set(data)
-    stretch = _point_data(out / "frame_0004.vtu")
+    stretch = _point_data(out / "frame_0004_f4_cam0.vtu")
     assert abs(np.mean(stretch["strain_xx"]) - (0.005 + 0.5 * 0.005 ** 2)) < 1e-4
     report = (out / "report.html").read_text()
-    assert "FAILED: " in report and "1 frame(s) FAILED (3)" in report and "data:image/png" in report
+    assert "FAILED: " in report and "1 frame(s) FAILED (3 (f3_cam0.png))" in report and "data:image/png" in report
     pvd = ET.parse(out / "displacement.pvd").getroot()
-    assert [d.get("file") for d in pvd.iter("DataSet")] == ["frame_0001.vtu", "frame_0002.vtu",
-                                                           "frame_0004.vtu"]
+    assert [d.get("file") for d in pvd.iter("DataSet")] == ["frame_0001_f1_cam0.vtu",
+                                                           "frame_0002_f2_cam0.vtu",
+                                                           "frame_0004_f4_cam0.vtu"]
 
 
 def test_each_frame_from_rest_and_tikhonov_on_each_component(series, tmp_path):
@@ -277,14 +278,21 @@ def test_georeg_needs_the_reference_spline(series, tmp_path, capsys):
                   "fe_spline.json")
 
 
-def test_every_frame_failing_is_an_error(series, tmp_path, capsys):
+def test_every_frame_failing_is_an_error_that_leaves_the_frames_to_inspect(series, tmp_path, capsys):
     folder, _ = series
     keys = 'cam0 = ["frames/f3_cam0.png"]\ncam1 = ["frames/f3_cam1.png"]'
     out = tmp_path / "out"
     assert cli.main(["-q", "track", str(_config(folder, series_keys=keys)), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()      # the frame's warning, then the error
     assert err[-1].startswith("georeg: error: every frame failed: frame 1: ")
-    assert "no texture" in err[-1] and not out.exists()
+    assert "no texture" in err[-1] and f"written to {out}" in err[-1]
+    assert "(f3_cam0.png)" in err[-2]                      # the warning names the image
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["failed_frames"] == [1] and summary["frames"][0]["status"] == "failed"
+    assert summary["frames"][0]["cam0"].endswith("f3_cam0.png")
+    assert "1 frame(s) FAILED (1 (f3_cam0.png))" in (out / "report.html").read_text()
+    pvd = ET.parse(out / "displacement.pvd").getroot()
+    assert list(pvd.iter("DataSet")) == []                  # nothing in the time series
 
 
 @pytest.mark.parametrize("incremental", ["true", "false"])

@@ -22,7 +22,9 @@ EXTRA = {"label": str, "converged": bool, "scales": list, "status": str,
          "shape_std_median_mm": (float, type(None)), "shape_std_max_mm": (float, type(None)),
          "shape_bias_median_mm": (float, type(None)), "shape_bias_max_mm": (float, type(None)),
          "noise_variance": (float, type(None)), "levels_chosen": (dict, type(None)),
-         "regularization": (dict, type(None))}
+         "regularization": (dict, type(None)),
+         # issue 22: what each georeg level dropped on a non-rectangular outline
+         "dropped_dofs": (dict, type(None))}
 
 
 def _tiny_figures():
@@ -48,6 +50,26 @@ def test_summary_schema_exactly_as_issue_4():
     files = [e["mesh_file"] for e in doc["methods"]]
     assert len(set(files)) == len(files)
     assert files[1] == "tikhonov_5_mm.vtu" and files[4] == "georeg_multiscale.vtu"
+
+
+def test_summary_says_what_each_georeg_level_dropped():
+    """A georeg result's ``dropped_dofs`` (level -> counts, from the solver's supports) is
+    written as is; the other methods say null; every earlier key is still there."""
+    import dataclasses
+
+    from georeg_plugin.levels.support import LevelSupport
+    run = fake_run()
+    before = summary_dict(run)["methods"][4]
+    counts = {"0": LevelSupport(0, 36, unseen_mesh=4, slivers=2).as_dict()}
+    results = list(run.results)
+    results[4] = dataclasses.replace(results[4], dropped_dofs=counts)
+    after = summary_dict(dataclasses.replace(run, results=tuple(results)))["methods"]
+    doc = json.loads(json.dumps(after[4], allow_nan=False))
+    assert doc["dropped_dofs"] == {"0": {"n_dofs": 36, "dropped": 4, "unseen_mesh": 4,
+                                         "unseen_images": 0, "slivers": 2}}
+    assert {k: v for k, v in doc.items() if k != "dropped_dofs"} == \
+        {k: v for k, v in json.loads(json.dumps(before)).items() if k != "dropped_dofs"}
+    assert after[0]["dropped_dofs"] is None
 
 
 def test_summary_without_truth_has_null_errors():

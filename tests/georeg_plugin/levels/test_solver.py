@@ -181,8 +181,9 @@ def test_schedule_maps_scale_to_level(two_levels):
 
 
 def test_singular_projection_names_the_unseen_dof(two_levels):
+    """Strict mode (``hold_unseen=False``): an unseen dof is an error naming it."""
     space, rng = two_levels
-    reg = GeometricRegularization(space)
+    reg = GeometricRegularization(space, hold_unseen=False)
     C = space.operators[0]
     unseen = 3
     seen_nodes = np.flatnonzero(C[unseen].toarray().ravel() == 0)
