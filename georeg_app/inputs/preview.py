@@ -31,7 +31,7 @@ from fesdic_core.imaging.image import Image, read_image
 
 from georeg_app.config.measure import Config
 from georeg_app.inputs.cameras import load_cameras
-from georeg_app.inputs.nominal import build_model
+from georeg_app.inputs.nominal import specimen_setup
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +61,7 @@ class Preview:
     points: np.ndarray
     seen_by: np.ndarray                 # (2, n_elements) bool: some point of it in camera c
     landmark_errors_px: np.ndarray
+    specimen: dict | None = None        # kind = "roi": the specimen frame and the surface fit
 
 
 def _seen(quad: PixelQuadrature, nodes: np.ndarray, images: Sequence[Image],
@@ -95,14 +96,16 @@ def preview(config: Config, images: Sequence[Image] | None = None) -> Preview:
         images = tuple(read_image(p, prefilter_px=config.method.prefilter_px,
                                   order=config.method.interpolation_order)
                        for p in (config.images.cam0, config.images.cam1))
-    cameras = tuple(load_cameras(config.cameras, images))
-    model = build_model(config.geometry, config.method.fixed_levels)
+    model, posed, roi = specimen_setup(config.geometry, config.method.fixed_levels,
+                                       load_cameras(config.cameras, images), images)
+    cameras = tuple(posed)
     quad = pixel_quadrature(model.mesh, cameras)
     seen, by = _seen(quad, model.mesh.nodes, images, cameras)
     points = quad.element_sum(np.ones(quad.n_points))
     return Preview(config=config, model=model, cameras=cameras, images=tuple(images),
                    quadrature=quad, seen_points=seen, points=points, seen_by=by,
-                   landmark_errors_px=_landmark_errors(config, cameras))
+                   landmark_errors_px=_landmark_errors(config, cameras),
+                   specimen=None if roi is None else roi.summary())
 
 
 def preview_summary(p: Preview) -> dict:
@@ -121,6 +124,7 @@ def preview_summary(p: Preview) -> dict:
             "min": float(seen.min()), "median": float(np.median(seen)), "max": float(seen.max())},
         "landmark_errors_px": errors.tolist(),
         "landmark_error_max_px": float(errors.max()) if errors.size else None,
+        **({} if p.specimen is None else {"specimen": p.specimen}),
     }
 
 

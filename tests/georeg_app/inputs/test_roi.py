@@ -346,3 +346,16 @@ def test_an_roi_configuration_written_back_by_the_report_reads_again(noise_folde
     plain = load_config(_config(noise_folder, "polygon_px = [[10, 10], [100, 10], [100, 90]]",
                                 name="plain.toml"))
     assert plain.geometry.roi.surface == "plane"
+
+
+@pytest.mark.slow
+def test_preview_of_an_roi_states_the_specimen_frame(plate, tmp_path):
+    folder, _, cams, _ = plate
+    config = _config(folder, f"polygon_px = {_poly(cams[0], L_SHAPE)}", name="preview.toml")
+    out = tmp_path / "preview"
+    assert cli.main(["-q", "preview", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "preview.json").read_text())
+    assert summary["geometry"] == "roi" and summary["specimen"]["matches"] > 500
+    assert summary["elements_seen_fraction"]["both"] == 1.0      # every element in both views
+    np.testing.assert_allclose(np.array(summary["specimen"]["frame_axes"]) @
+                               np.array(summary["specimen"]["frame_axes"]).T, np.eye(3), atol=1e-9)
