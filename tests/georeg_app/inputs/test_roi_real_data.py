@@ -38,6 +38,7 @@ def _run(tmp_path, calibration, example=EXAMPLE):
 
 
 def test_the_gt4_specimen_from_its_roi_with_two_calibrations(tmp_path):
+    """The whole D, cut-out excluded, georeg levels "auto" (the example as it is)."""
     normals = []
     for calibration in ("vic3d", "dice"):
         specimen, method, cam0 = _run(tmp_path, calibration)
@@ -47,7 +48,8 @@ def test_the_gt4_specimen_from_its_roi_with_two_calibrations(tmp_path):
         assert specimen["surface_rms_mm"] < 0.02, specimen
         assert specimen["misfit_px"] < 1.5 * specimen["epipolar_px"], specimen
         assert specimen["unseen_share"] < 0.05 and specimen["matches"] > 1000
-        assert method["status"] == "ok" and method["residual_to_noise"] < 1.0, method
+        assert method["name"] == "georeg" and method["status"] == "ok", method
+        assert method["residual_to_noise"] < 1.0, method
         assert method["distance_to_bfp_rms_mm"] < 0.03, method
         normals.append(cam0.R[:, 2])            # the specimen's normal in camera 0's frame
     # the two calibrations of the rig put the specimen's plane at the same angle to camera 0
