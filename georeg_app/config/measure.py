@@ -173,7 +173,7 @@ class GeometryConfig:
     elements: int | None = None
     faces: tuple | None = None
     polygon_px: tuple | None = None
-    exclude_px: tuple = ()
+    exclude_px: tuple | None = None
     mask: Path | None = None
     surface: str | None = None        # kind = "roi": "plane" (its default) or "quadric"
 

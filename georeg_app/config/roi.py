@@ -45,7 +45,7 @@ class RoiConfig:
         ``surface``), as arrays."""
         polygon = geometry.polygon_px
         return cls(polygon=None if polygon is None else np.array(polygon, dtype=float),
-                   exclude=tuple(np.array(p, dtype=float) for p in geometry.exclude_px),
+                   exclude=tuple(np.array(p, dtype=float) for p in geometry.exclude_px or ()),
                    mask=geometry.mask, surface=geometry.surface or "plane")
 
 
@@ -103,5 +103,5 @@ def take_roi(t: Table, kind: str, base: Path) -> dict:
         raise t.error("surface", "expected one of " + ", ".join(f'"{s}"' for s in ROI_SURFACES)
                       + f', got "{surface}"')
     return {"polygon_px": None if polygon is None else _rows(polygon),
-            "exclude_px": tuple(_rows(p) for p in exclude or ()),
+            "exclude_px": None if exclude is None else tuple(_rows(p) for p in exclude),
             "mask": existing_file(t, "mask", mask, base), "surface": surface}

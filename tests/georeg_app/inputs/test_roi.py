@@ -364,3 +364,12 @@ def test_preview_of_an_roi_states_the_specimen_frame(plate, tmp_path):
     assert summary["elements_seen_fraction"]["both"] == 1.0      # every element in both views
     np.testing.assert_allclose(np.array(summary["specimen"]["frame_axes"]) @
                                np.array(summary["specimen"]["frame_axes"]).T, np.eye(3), atol=1e-9)
+
+
+def test_an_roi_geometry_goes_through_the_python_front(noise_folder):
+    from georeg.inputs import geometry_config
+    g = load_config(_config(noise_folder, "polygon_px = [[10, 10], [100, 10], [100, 90]]\n"
+                                          "exclude_px = [[[40, 20], [60, 20], [60, 40]]]")).geometry
+    assert geometry_config(g, noise_folder) == g
+    assert geometry_config({"kind": "roi", "polygon_px": np.array(g.polygon_px)},
+                           noise_folder).roi.exclude == ()
