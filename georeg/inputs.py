@@ -12,9 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import shutil
-import tempfile
-import weakref
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Sequence
@@ -22,13 +19,13 @@ from typing import Any, Sequence
 import numpy as np
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.cameras.rig import write_cameras_json
 from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig,
                                        MethodConfig, cameras_table, geometry_table, images_table, method_table)
 from georeg_app.config.toml_schema import ConfigError
 from georeg_app.inputs.cad import CAD_SUFFIXES
+from georeg_app.inputs.cameras import temporary_cameras
 
 __all__ = ["PathLike", "plain", "camera_source", "images_config", "cameras_config",
            "geometry_config", "method_config"]
@@ -125,21 +122,6 @@ def camera_source(path: Path) -> str:
                      ".xml, .z3d or .csv; or say which with source=)")
 
 
-def _write_cameras(cameras: Sequence[Camera]) -> CamerasConfig:
-    """Cameras given as objects: written to a temporary JSON that the returned config owns
-    (removed when no copy of it is referenced any more, at the latest at exit), as the
-    demo does, so that every step of the run reads them as the command line would."""
-    folder = Path(tempfile.mkdtemp(prefix="georeg_cameras_"))
-    try:
-        write_cameras_json(folder / "cameras.json", cameras)
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
-        raise
-    config = CamerasConfig(file=folder / "cameras.json")
-    weakref.finalize(config, shutil.rmtree, folder, ignore_errors=True)
-    return config
-
-
 def cameras_config(cameras: Any, base: Path, source: str | None = None,
                    landmarks: Sequence[dict] | None = None) -> CamerasConfig:
     """``cameras``, a calibration file or a pair of core ``Camera``s, as ``[cameras]``.
@@ -166,7 +148,7 @@ def cameras_config(cameras: Any, base: Path, source: str | None = None,
     if landmarks is not None or source is not None:
         raise ValueError("cameras: landmarks= and source= are for a calibration file; Camera "
                          "objects are used as they are")
-    return _write_cameras(pair)
+    return temporary_cameras(pair)
 
 
 def geometry_config(nominal: Any, base: Path) -> GeometryConfig:

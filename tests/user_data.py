@@ -19,3 +19,16 @@ def write_user_data(folder, arrays, cameras):
         cv2.imwrite(str(folder / f"cam{k}.png"), np.asarray(a).astype(np.uint8))
     write_cameras_json(folder / "cameras.json", cameras)
     return folder
+
+
+#: the nominal plates of the tests' configurations ([geometry] tables)
+PLATE_WITH_HOLE = 'kind = "plate_with_hole"\nlength_mm = 100.0\nwidth_mm = 50.0\nhole_radius_mm = 14.0'
+RECTANGLE_100 = 'kind = "rectangle"\nlength_mm = 100.0\nwidth_mm = 50.0'
+
+
+def user_config(geometry: str, method: str = "", cam0: str = "cam0.png", cam1: str = "cam1.png",
+                cameras: str = 'file = "cameras.json"') -> str:
+    """The TOML of a run on a user's files: ``[images]``, ``[cameras]``, then the given
+    ``[geometry]`` and ``[method]`` lines (one test configuration written once)."""
+    return (f'[images]\ncam0 = "{cam0}"\ncam1 = "{cam1}"\n[cameras]\n{cameras}\n'
+            f"[geometry]\n{geometry}\n[method]\n{method}\n")

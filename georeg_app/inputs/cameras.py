@@ -2,19 +2,23 @@
 calibration (pyvale CSV, OpenCV FileStorage, VIC-3D, DICe) posed by the landmarks."""
 from __future__ import annotations
 
+import shutil
+import tempfile
+import weakref
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from fesdic_core.cameras.io.formats import read_dice, read_opencv_stereo, read_vic3d
 from fesdic_core.cameras.rig import (initial_rig_pose, read_cameras_json, read_pyvale_csv,
-                                     stereo_transform)
+                                     stereo_transform, write_cameras_json)
 from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import CamerasConfig
 from georeg_app.errors import InputError
 
-__all__ = ["load_cameras"]
+__all__ = ["load_cameras", "temporary_cameras"]
 
 
 def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
@@ -42,3 +46,19 @@ def load_cameras(cameras: CamerasConfig, images: Sequence[Image]) -> list:
     px0 = np.array([lm.cam0_px for lm in cameras.landmarks])
     px1 = np.array([lm.cam1_px for lm in cameras.landmarks])
     return list(initial_rig_pose(cam0, cam1, xyz, px0, px1, R, t))
+
+
+def temporary_cameras(cameras: Sequence, prefix: str = "georeg_cameras_") -> CamerasConfig:
+    """Cameras given as objects, written to a temporary ``cameras.json`` that the returned
+    ``[cameras]`` owns: its folder is removed when no copy of the config refers to it any
+    more (at the end of a run), at the latest at exit. Every step of the run then reads the
+    cameras as the command line does (the demo, and cameras passed to :func:`georeg.measure`)."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    try:
+        write_cameras_json(folder / "cameras.json", cameras)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    config = CamerasConfig(file=folder / "cameras.json")
+    weakref.finalize(config, shutil.rmtree, folder, ignore_errors=True)   # kept by copies
+    return config

@@ -69,6 +69,20 @@ def _robust_sigma(r: np.ndarray) -> float:
     return 1.4826 * float(np.median(np.abs(r - np.median(r))))
 
 
+def _fit_on(xyz: np.ndarray, inliers: np.ndarray, surface: str):
+    """The plane (and the quadric over it) fitted to the inliers; the residuals (n,) of every
+    point along the plane's normal: ``(point, axes, quadric coefficients or None, r)``."""
+    point, axes = _plane(xyz[inliers])
+    local = (xyz - point) @ axes.T
+    r = local[:, 2]
+    coeffs = None
+    if surface == "quadric":
+        A = _quadric_terms(local[:, :2])
+        coeffs = np.linalg.lstsq(A[inliers], r[inliers], rcond=None)[0]
+        r = r - A @ coeffs
+    return point, axes, coeffs, r
+
+
 def fit_surface(xyz: np.ndarray, surface: str = "plane", iterations: int = 10) -> SurfaceFit:
     """Robust fit of a plane (or a quadric over it) to points ``xyz`` (n, 3) mm, n >= 6.
 
@@ -81,27 +95,14 @@ def fit_surface(xyz: np.ndarray, surface: str = "plane", iterations: int = 10) -
     if surface not in ("plane", "quadric"):
         raise ValueError(f"fit_surface: surface must be 'plane' or 'quadric', got {surface!r}")
     inliers = np.ones(len(xyz), bool)
-    coeffs = None
     for _ in range(iterations):
-        point, axes = _plane(xyz[inliers])
-        local = (xyz - point) @ axes.T
-        r = local[:, 2]
-        if surface == "quadric":
-            A = _quadric_terms(local[:, :2])
-            coeffs = np.linalg.lstsq(A[inliers], r[inliers], rcond=None)[0]
-            r = r - A @ coeffs
+        point, axes, coeffs, r = _fit_on(xyz, inliers, surface)
         sigma = _robust_sigma(r[inliers])
         new = np.abs(r - np.median(r[inliers])) <= OUTLIER_SIGMAS * max(sigma, 1e-12)
         if np.count_nonzero(new) < 6 or np.array_equal(new, inliers):
             break
         inliers = new
-    point, axes = _plane(xyz[inliers])
-    local = (xyz - point) @ axes.T
-    r = local[:, 2]
-    if surface == "quadric":
-        A = _quadric_terms(local[:, :2])
-        coeffs = np.linalg.lstsq(A[inliers], r[inliers], rcond=None)[0]
-        r = r - A @ coeffs
+    point, axes, coeffs, r = _fit_on(xyz, inliers, surface)
     rms = float(np.sqrt(np.mean(r[inliers] ** 2)))
     return SurfaceFit(point=point, normal=axes[2], quadric=coeffs, axes=axes, inliers=inliers,
                       rms_mm=rms)

@@ -8,22 +8,18 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import shutil
 import sys
-import tempfile
-import weakref
 from pathlib import Path
 
 import numpy as np
 
-from fesdic_core.cameras.rig import write_cameras_json
 from fesdic_core.imaging.image import Image
 from fesdic_core.shape.gauge import move_cameras_with_specimen
 from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
 from fesdic_core.synthetic.specimen import Specimen, twisted_plate
 
-from georeg_app.config.measure import (CamerasConfig, Config, GeometryConfig, ImagesConfig,
-                                       MethodConfig, OutputConfig)
+from georeg_app.config.measure import Config, GeometryConfig, ImagesConfig, MethodConfig, OutputConfig
+from georeg_app.inputs.cameras import temporary_cameras
 
 logger = logging.getLogger(__name__)
 
@@ -71,19 +67,14 @@ def demo_config(out_dir) -> tuple[Config, tuple, Truth]:
     rotation = np.radians(DEMO["pose_error_deg"]) * np.array([0.6, -0.48, 0.64])
     translation = DEMO["pose_error_mm"] * np.array([0.48, 0.64, -0.6])
     initial = move_cameras_with_specimen(cams, translation, rotation, np.zeros(3))
-    inputs = Path(tempfile.mkdtemp(prefix="georeg_demo_"))
-    try:
-        write_cameras_json(inputs / "cameras.json", initial)
-    except BaseException:
-        shutil.rmtree(inputs, ignore_errors=True)
-        raise
+    cameras = temporary_cameras(initial, prefix="georeg_demo_")
+    inputs = cameras.file.parent
     config = Config(
         images=ImagesConfig(cam0=inputs / "cam0 (rendered in memory)", cam1=inputs / "cam1 (rendered in memory)"),
-        cameras=CamerasConfig(file=inputs / "cameras.json"),
+        cameras=cameras,
         geometry=GeometryConfig(kind="plate_with_hole", length_mm=DEMO["view_mm"],
                                 width_mm=DEMO["width_mm"], hole_radius_mm=DEMO["hole_radius_mm"]),
         method=method,
         output=OutputConfig(dir=Path(out_dir)),
         source=inputs / "demo (embedded)")
-    weakref.finalize(config.cameras, shutil.rmtree, inputs, ignore_errors=True)  # kept by copies
     return config, images, Truth(specimen=specimen, cameras=tuple(cams))

@@ -11,25 +11,9 @@ import georeg
 from fesdic_core.cameras.rig import read_cameras_json
 from georeg import api
 from georeg_app import cli
-from user_data import perturbed_pose, write_user_data
+from user_data import PLATE_WITH_HOLE, perturbed_pose, user_config, write_user_data
 
-CONFIG = """
-[images]
-cam0 = "cam0.png"
-cam1 = "cam1.png"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "plate_with_hole"
-length_mm = 100.0
-width_mm = 50.0
-hole_radius_mm = 14.0
-elements = 128
-[method]
-name = "georeg"
-levels = 2
-scales = 2
-"""
+CONFIG = user_config(PLATE_WITH_HOLE + "\nelements = 128", 'name = "georeg"\nlevels = 2\nscales = 2')
 NOMINAL = {"kind": "plate_with_hole", "length_mm": 100.0, "width_mm": 50.0,
            "hole_radius_mm": 14.0, "elements": 128}
 #: summary.json entries that differ between two runs of the same data (wall times)

@@ -20,28 +20,12 @@ from georeg_app.shape import demo, pipeline
 from georeg_app.config.measure import MethodConfig
 from georeg_app.report.figures import georeg_pair
 from shape_truth import bounded_shape_error, rms
-from user_data import perturbed_pose, write_user_data
+from user_data import PLATE_WITH_HOLE, perturbed_pose, user_config, write_user_data
 
 pytestmark = pytest.mark.slow         # the demo end to end (the README's claims)
 
-COMPARE = """
-[images]
-cam0 = "cam0.png"
-cam1 = "cam1.png"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "plate_with_hole"
-length_mm = 100.0
-width_mm = 50.0
-hole_radius_mm = 14.0
-elements = 128
-[method]
-levels = 3
-scales = 3
-tikhonov_length_mm = [5.0, 10.0, 20.0]
-calibrate = true
-"""
+COMPARE = user_config(PLATE_WITH_HOLE + "\nelements = 128",
+                      "levels = 3\nscales = 3\ntikhonov_length_mm = [5.0, 10.0, 20.0]\ncalibrate = true")
 
 
 @pytest.fixture(scope="module")

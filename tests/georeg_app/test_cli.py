@@ -12,46 +12,17 @@ import pytest
 from fesdic_core.shape.verdict import ShapeDivergedError
 from georeg_app import cli
 from georeg_app_fakes import FakeSpec, fake_run
+from cli_checks import one_error_line, placeholder_run
 
 ROOT = Path(__file__).resolve().parents[2]
 
-CONFIG = """
-[images]
-cam0 = "left.tif"
-cam1 = "right.tif"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "rectangle"
-length_mm = 100.0
-width_mm = 50.0
-[method]
-name = "{name}"
-levels = {levels}
-tikhonov_length_mm = [5, 10]
-"""
-
-
-def _config(folder: Path, name="georeg", levels="3") -> Path:
-    for f in ("left.tif", "right.tif", "cameras.json"):
-        (folder / f).write_bytes(b"x")
-    path = folder / "config.toml"
-    path.write_text(CONFIG.format(name=name, levels=levels))
-    return path
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("georeg: error: ")
-    return lines[0]
 
 
 @pytest.mark.parametrize("command", ["measure", "compare"])
 def test_bad_config_exits_1_with_one_line_naming_the_key(tmp_path, capsys, command):
     out = tmp_path / "out"
     code = cli.main([command, str(_config(tmp_path, levels='"three"')), "--out", str(out)])
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert code == 1
     assert '[method] levels: expected an integer or "auto", got "three"' in line
     assert not out.exists() and "Traceback" not in line
@@ -59,7 +30,7 @@ def test_bad_config_exits_1_with_one_line_naming_the_key(tmp_path, capsys, comma
 
 def test_missing_config_file(tmp_path, capsys):
     assert cli.main(["-q", "measure", str(tmp_path / "none.toml")]) == 1
-    assert "none.toml: configuration file not found" in _one_error_line(capsys.readouterr().err)
+    assert "none.toml: configuration file not found" in one_error_line(capsys.readouterr().err)
 
 
 @pytest.mark.slow
@@ -70,12 +41,16 @@ def test_subprocess_exit_status_and_verbose_traceback(tmp_path):
     quiet = subprocess.run([sys.executable, "-m", "georeg_app", "measure", str(config), "--out", str(out)],
                            capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert quiet.returncode == 1 and quiet.stdout == ""
-    assert '[method] levels: must be >= 1 or "auto", got 0' in _one_error_line(quiet.stderr)
+    assert '[method] levels: must be >= 1 or "auto", got 0' in one_error_line(quiet.stderr)
     verbose = subprocess.run([sys.executable, "-m", "georeg_app", "measure", str(config), "--verbose"],
                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
     assert verbose.returncode == 1 and "Traceback" in verbose.stderr
     assert verbose.stderr.strip().splitlines()[-1].startswith("georeg: error: ")
     assert sorted(os.listdir(tmp_path)) == ["cameras.json", "config.toml", "left.tif", "right.tif"]
+
+
+def _config(folder: Path, name="georeg", levels="3") -> Path:
+    return placeholder_run(folder, f'name = "{name}"\nlevels = {levels}\ntikhonov_length_mm = [5, 10]')
 
 
 def test_version_and_usage(capsys):
@@ -124,7 +99,7 @@ def test_pipeline_error_exits_1_and_writes_nothing(tmp_path, capsys, fake_pipeli
     assert "Traceback" not in err and err.count("georeg: error: ") == 1
     assert err.strip().splitlines()[-1].startswith("georeg: error: shape Gauss-Newton diverged")
     assert cli.main(["-q", "measure", str(_config(tmp_path)), "--out", str(out)]) == 1
-    assert "diverged at scale 0" in _one_error_line(capsys.readouterr().err)
+    assert "diverged at scale 0" in one_error_line(capsys.readouterr().err)
     assert not out.exists() and not [p for p in os.listdir(tmp_path) if "staging" in p]
 
 

@@ -16,6 +16,7 @@ from fesdic_core.fe.mesh import rectangle_mesh
 from fesdic_core.fe.mesh_io import write_mesh
 from georeg_app import cli
 from user_data import write_user_data
+from cli_checks import fails_naming
 
 CONFIG = """
 [images]
@@ -49,16 +50,6 @@ def _config(folder, name="config.toml", cam0="cam0.png", cam1="cam1.png", camera
     return path
 
 
-def _fails_naming(capsys, config, out, *names):
-    assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("georeg: error: "), err
-    for name in names:
-        assert name in err[0], (name, err[0])
-    assert not out.exists()
-    return err[0]
-
-
 @pytest.mark.slow
 def test_measure_writes_a_shape_that_matches_the_truth(case, tmp_path, capsys):
     folder, specimen, _, _ = case
@@ -84,14 +75,14 @@ def test_measure_writes_a_shape_that_matches_the_truth(case, tmp_path, capsys):
 
 def test_missing_image_is_named(case, tmp_path, capsys):
     folder = case[0]
-    _fails_naming(capsys, _config(folder, "c1.toml", cam1="nowhere.png"), tmp_path / "out",
+    fails_naming(capsys, _config(folder, "c1.toml", cam1="nowhere.png"), tmp_path / "out",
                   "nowhere.png")
 
 
 def test_images_of_different_sizes_are_named(case, tmp_path, capsys):
     folder, _, _, images = case
     cv2.imwrite(str(tmp_path / "small.png"), images[1].values[:400, :600].astype(np.uint8))
-    _fails_naming(capsys, _config(folder, "c2.toml", cam1=str(tmp_path / "small.png")),
+    fails_naming(capsys, _config(folder, "c2.toml", cam1=str(tmp_path / "small.png")),
                   tmp_path / "out", "small.png", "different sizes")
 
 
@@ -100,7 +91,7 @@ def test_nan_in_an_image_is_named(case, tmp_path, capsys):
     values = images[1].values.astype(np.float32)
     values[100, 200] = np.nan
     cv2.imwrite(str(tmp_path / "nan.tiff"), values)
-    _fails_naming(capsys, _config(folder, "c3.toml", cam1=str(tmp_path / "nan.tiff")),
+    fails_naming(capsys, _config(folder, "c3.toml", cam1=str(tmp_path / "nan.tiff")),
                   tmp_path / "out", "nan.tiff", "non-finite")
 
 
@@ -109,7 +100,7 @@ def test_calibration_missing_a_field_is_named(case, tmp_path, capsys):
     data = json.loads((folder / "cameras.json").read_text())
     del data["cameras"][1]["tvec_mm"]
     (tmp_path / "cams.json").write_text(json.dumps(data))
-    _fails_naming(capsys, _config(folder, "c4.toml", cameras=str(tmp_path / "cams.json")),
+    fails_naming(capsys, _config(folder, "c4.toml", cameras=str(tmp_path / "cams.json")),
                   tmp_path / "out", "cams.json", "tvec_mm")
 
 
@@ -120,7 +111,7 @@ def test_degenerate_element_is_named(case, tmp_path, capsys):
     conn = mesh.blocks[0].connectivity
     nodes[conn[7, 2]] = nodes[conn[7, 0]]                         # element 7 folds onto a line
     write_mesh(tmp_path / "bad.vtu", dataclasses.replace(mesh, nodes=nodes))
-    line = _fails_naming(capsys, _config(folder, "c5.toml", geometry=f'kind = "mesh"\nfile = '
+    line = fails_naming(capsys, _config(folder, "c5.toml", geometry=f'kind = "mesh"\nfile = '
                                          f'"{tmp_path / "bad.vtu"}"'), tmp_path / "out", "bad.vtu", "elements 7,")
     assert "degenerate" in line or "inverted" in line
 
@@ -129,7 +120,7 @@ def test_mesh_outside_the_images_is_named(case, tmp_path, capsys):
     folder = case[0]
     mesh = rectangle_mesh(60.0, 40.0, 6, 4, "Q4", center=(500.0, 0.0))
     write_mesh(tmp_path / "far.vtu", mesh)
-    _fails_naming(capsys, _config(folder, "c6.toml", geometry=f'kind = "mesh"\nfile = '
+    fails_naming(capsys, _config(folder, "c6.toml", geometry=f'kind = "mesh"\nfile = '
                                   f'"{tmp_path / "far.vtu"}"'), tmp_path / "out",
                   "outside", "cam0")
 
@@ -139,7 +130,7 @@ def test_swapped_images_fail_the_measurement_and_write_nothing(case, tmp_path, c
     """cam0 <-> cam1 swapped: the run ends, but its residual is many times what the images'
     noise explains; `measure` exits 1 with one line saying so and publishes nothing."""
     folder = case[0]
-    line = _fails_naming(capsys, _config(folder, "c7.toml", cam0="cam1.png", cam1="cam0.png"),
+    line = fails_naming(capsys, _config(folder, "c7.toml", cam0="cam1.png", cam1="cam0.png"),
                          tmp_path / "out", "failed", "times the", "image noise explains")
     ratio = float(line.split(" is ")[1].split(" times")[0])
     assert ratio > 3.0, line
@@ -150,7 +141,7 @@ def test_pure_noise_images_are_refused(case, tmp_path, capsys):
     rng = np.random.default_rng(3)
     for k in range(2):
         cv2.imwrite(str(tmp_path / f"noise{k}.png"), rng.integers(0, 256, (480, 640)).astype(np.uint8))
-    _fails_naming(capsys, _config(folder, "c8.toml", cam0=str(tmp_path / "noise0.png"),
+    fails_naming(capsys, _config(folder, "c8.toml", cam0=str(tmp_path / "noise0.png"),
                                   cam1=str(tmp_path / "noise1.png")), tmp_path / "out",
                   "noise0.png", "no texture")
 
@@ -174,7 +165,7 @@ def test_sizes_beyond_the_images_are_refused_before_computing(case, tmp_path, ca
     config = _config(folder, "c9.toml")
     config.write_text(config.read_text().replace("levels = 2", method) if "levels" in method
                       else config.read_text().replace("scales = 2", method))
-    _fails_naming(capsys, config, tmp_path / "out", message)
+    fails_naming(capsys, config, tmp_path / "out", message)
 
 
 @pytest.mark.slow
@@ -213,7 +204,7 @@ def test_levels_beyond_a_legacy_mesh_are_refused(case, tmp_path, capsys):
     write_mesh(tmp_path / "coarse.vtu", rectangle_mesh(60.0, 40.0, 6, 4, "Q4"))
     config = _config(folder, "c10.toml", geometry=f'kind = "mesh"\nfile = "{tmp_path / "coarse.vtu"}"')
     config.write_text(config.read_text().replace("levels = 2", "levels = 4"))
-    _fails_naming(capsys, config, tmp_path / "out", "levels = 4", "100 dofs", "35 nodes", "coarse.vtu")
+    fails_naming(capsys, config, tmp_path / "out", "levels = 4", "100 dofs", "35 nodes", "coarse.vtu")
 
 
 @pytest.mark.slow

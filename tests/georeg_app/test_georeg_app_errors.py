@@ -18,39 +18,15 @@ from georeg_app import cli
 from georeg_app.config.toml_schema import ConfigError, ConfigFileNotFoundError
 from georeg_app.errors import USER_ERRORS, GeoregError, InputError, MeasurementFailed
 from georeg_plugin.errors import GeoregPluginError, SplineFileError
+from cli_checks import one_error_line, placeholder_run
 
-CONFIG = """
-[images]
-cam0 = "left.tif"
-cam1 = "right.tif"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "rectangle"
-length_mm = 100.0
-width_mm = 50.0
-[method]
-name = "georeg"
-levels = {levels}
-"""
-
-
-def _config(folder, levels="3"):
-    for name in ("left.tif", "right.tif", "cameras.json"):
-        (folder / name).write_bytes(b"x")
-    path = folder / "config.toml"
-    path.write_text(CONFIG.format(levels=levels))
-    return path
-
-
-def _one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("georeg: error: ")
-    return lines[0]
 
 
 # ------------------------------------------------------------------ the family
+def _config(folder, levels="3"):
+    return placeholder_run(folder, f'name = "georeg"\nlevels = {levels}')
+
+
 def test_every_exception_class_of_the_app_derives_from_its_base():
     assert outside_family(georeg_app, GeoregError) == []
 
@@ -74,13 +50,13 @@ def test_user_errors_are_the_four_bases_and_os_error():
 # ------------------------------------------------------------------ user errors
 def test_missing_config_file_is_one_line_and_exit_1(tmp_path, capsys):
     assert cli.main(["measure", str(tmp_path / "none.toml")]) == cli.EXIT_ERROR == 1
-    assert "none.toml: configuration file not found" in _one_error_line(capsys.readouterr().err)
+    assert "none.toml: configuration file not found" in one_error_line(capsys.readouterr().err)
 
 
 def test_bad_toml_value_is_one_line_naming_the_key(tmp_path, capsys):
     out = tmp_path / "out"
     code = cli.main(["measure", str(_config(tmp_path, levels='"three"')), "--out", str(out)])
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert code == 1
     assert "config.toml: [method] levels" in line and "three" in line
     assert not out.exists()
@@ -101,7 +77,7 @@ def test_each_family_base_is_a_user_error(tmp_path, capsys, monkeypatch, error):
         raise error
     monkeypatch.setattr(cli, "load_config", load_config)
     assert cli.main(["measure", str(_config(tmp_path))]) == 1
-    line = _one_error_line(capsys.readouterr().err)
+    line = one_error_line(capsys.readouterr().err)
     assert line == f"georeg: error: {' '.join(str(error).split())}"
 
 
@@ -118,7 +94,7 @@ def test_interrupt_is_exit_130(tmp_path, capsys, monkeypatch):
         raise KeyboardInterrupt
     monkeypatch.setattr(cli, "load_config", load_config)
     assert cli.main(["measure", str(_config(tmp_path))]) == cli.EXIT_INTERRUPTED == 130
-    assert "interrupted" in _one_error_line(capsys.readouterr().err)
+    assert "interrupted" in one_error_line(capsys.readouterr().err)
 
 
 # ------------------------------------------------------------------ bugs

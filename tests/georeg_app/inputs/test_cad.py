@@ -25,26 +25,12 @@ from georeg_plugin.io.iges import read_iges_surfaces
 from georeg_plugin.io.spline_io import read_part_json, write_iges
 from scenes import cad_nominal, cad_scene
 from shape_truth import bounded_shape_error, rms
-from user_data import write_user_data
+from user_data import user_config, write_user_data
 
 pytestmark = pytest.mark.slow         # CAD parts measured end to end
 
 NAMES = {"panel": ["panel"], "folded": ["left", "right"]}
-CONFIG = """
-[images]
-cam0 = "cam0.png"
-cam1 = "cam1.png"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "cad"
-file = "{file}"
-{extra}
-[method]
-name = "georeg"
-levels = 2
-scales = 2
-"""
+CONFIG = user_config('kind = "cad"\nfile = "{file}"\n{extra}', 'name = "georeg"\nlevels = 2\nscales = 2')
 
 
 @pytest.fixture(scope="module")

@@ -9,22 +9,10 @@ import pytest
 from georeg_app import cli
 from georeg_app.config.measure import Landmark, load_config
 from georeg_app.inputs.preview import PREVIEW_FILES, preview, preview_summary
-from user_data import write_user_data
+from user_data import user_config, write_user_data
 
-CONFIG = """
-[images]
-cam0 = "cam0.png"
-cam1 = "cam1.png"
-[cameras]
-file = "cameras.json"
-[geometry]
-kind = "rectangle"
-length_mm = {length}
-width_mm = 40.0
-elements = 24
-[method]
-levels = 2
-"""
+CONFIG = user_config('kind = "rectangle"\nlength_mm = {length}\nwidth_mm = 40.0\nelements = 24',
+                     "levels = 2")
 
 
 @pytest.fixture(scope="module")

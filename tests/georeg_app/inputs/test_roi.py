@@ -24,6 +24,7 @@ from georeg_app.config.toml_schema import ConfigError
 from georeg_app.errors import InputError
 from georeg_app.inputs.roi import roi_specimen
 from georeg_app.inputs.roi_surface import fit_surface
+from cli_checks import fails_naming
 
 MOVE_RVEC, MOVE_T = np.array([0.3, -0.2, 0.5]), np.array([10.0, -5.0, 300.0])
 
@@ -93,15 +94,6 @@ def _to_plate(points, cameras_json, true_cam0):
     cam = read_cameras_json(cameras_json)[0]
     X_cam = points @ cam.R.T + cam.tvec
     return (X_cam - true_cam0.tvec) @ true_cam0.R
-
-
-def _fails_naming(capsys, config, out, *names):
-    assert cli.main(["-q", "measure", str(config), "--out", str(out)]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("georeg: error: "), err
-    for name in names:
-        assert name in err[0], (name, err[0])
-    assert not out.exists()
 
 
 def test_fit_surface_recovers_a_tilted_plane_and_a_quadric_despite_outliers():
@@ -238,7 +230,7 @@ def test_roi_keys_are_checked_by_the_config_reader(noise_folder):
 def test_an_roi_outside_the_image_is_one_error_and_nothing_written(noise_folder, capsys):
     tmp_path = noise_folder
     config = _config(noise_folder, "polygon_px = [[10, 10], [700, 10], [300, 200]]", name="out.toml")
-    _fails_naming(capsys, config, tmp_path / "out", "polygon_px", "outside camera 0's image")
+    fails_naming(capsys, config, tmp_path / "out", "polygon_px", "outside camera 0's image")
 
 
 @pytest.mark.slow
@@ -248,13 +240,13 @@ def test_bad_rois_are_one_error_each_and_nothing_written(plate, tmp_path, capsys
     blank.mkdir()
     write_user_data(blank, [np.full_like(a, 120.0) for a in arrays], _moved(cams))
     config = _config(blank, f"polygon_px = {_poly(cams[0], OUTER)}")
-    _fails_naming(capsys, config, tmp_path / "a", "polygon_px", "no texture")
+    fails_naming(capsys, config, tmp_path / "a", "polygon_px", "no texture")
     # camera 1 sees another texture (its image upside down): no match on an epipolar line
     other = folder / "other"
     other.mkdir()
     write_user_data(other, [arrays[0], arrays[1][::-1]], _moved(cams))
     config = _config(other, f"polygon_px = {_poly(cams[0], OUTER)}")
-    _fails_naming(capsys, config, tmp_path / "b", "polygon_px", "too few stereo matches")
+    fails_naming(capsys, config, tmp_path / "b", "polygon_px", "too few stereo matches")
     # a wrong calibration: camera 1 shifted 2 mm, the matches leave their epipolar lines
     wrong = _moved(cams)
     wrong[1] = wrong[1].with_extrinsics(wrong[1].extrinsics + [0, 0, 0, 0, 2.0, 0])
@@ -262,7 +254,7 @@ def test_bad_rois_are_one_error_each_and_nothing_written(plate, tmp_path, capsys
     write_cameras_json(folder / "wrong.json", wrong)
     config = _config(folder, f"polygon_px = {_poly(cams[0], OUTER)}", name="wrong.toml",
                      cameras="wrong.json")
-    _fails_naming(capsys, config, tmp_path / "c", "polygon_px", "stereo matches")
+    fails_naming(capsys, config, tmp_path / "c", "polygon_px", "stereo matches")
 
 
 def test_build_model_refuses_the_roi_kind_without_images():
