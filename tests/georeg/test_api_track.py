@@ -4,19 +4,14 @@ progress callback. A small rendered series (the plate of tests/georeg_app/test_t
 exact cameras."""
 import json
 
-import cv2
 import meshio
 import numpy as np
 import pytest
 
 import georeg
-from fesdic_core.cameras.rig import write_cameras_json
-from fesdic_core.fe.mesh import rectangle_mesh
-from fesdic_core.fe.mesh_io import write_mesh
 from fesdic_core.synthetic.motion import RigidMotion
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
-from fesdic_core.synthetic.specimen import flat_plate
 from georeg_app import cli
+from series_data import write_series
 
 pytestmark = pytest.mark.slow         # a series measured end to end
 
@@ -26,23 +21,7 @@ MOTIONS = (RigidMotion((0.1, -0.05, 0.05)), RigidMotion((0.2, -0.1, 0.1)))
 @pytest.fixture(scope="module")
 def series(tmp_path_factory):
     folder = tmp_path_factory.mktemp("api_series")
-    cameras = demo_cameras(image_size=(320, 240), field_mm=72.0)
-    plate = flat_plate(60.0, 40.0, speckle_mm=speckle_mm_for(cameras[0], 4.0), seed=3)
-
-    def save(arrays, stem):
-        for k, a in enumerate(arrays):
-            cv2.imwrite(str(folder / f"{stem}_cam{k}.png"), a.astype(np.uint8))
-
-    save(render_stereo(plate, cameras, supersample=2, noise_std=2.0, seed=1, progress=False), "ref")
-    for i, motion in enumerate(MOTIONS, start=1):
-        save(render_stereo(plate, cameras, supersample=2, noise_std=2.0, seed=10 + i,
-                           progress=False, motion=motion), f"f{i}")
-    ref = folder / "shape_out"
-    ref.mkdir()
-    write_mesh(ref / "fe.vtu", rectangle_mesh(44.0, 30.0, 4, 3, family="Q4"))
-    write_cameras_json(ref / "fe_cameras.json", cameras)
-    (ref / "summary.json").write_text(json.dumps(
-        {"methods": [{"label": "FE", "status": "ok", "mesh_file": "fe.vtu"}]}))
+    write_series(folder, MOTIONS, supersample=2)
     (folder / "track.toml").write_text(
         '[images]\ncam0 = "ref_cam0.png"\ncam1 = "ref_cam1.png"\n'
         '[series]\ncam0 = "f*_cam0.png"\ncam1 = "f*_cam1.png"\n'

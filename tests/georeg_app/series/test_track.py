@@ -16,48 +16,23 @@ import meshio
 import numpy as np
 import pytest
 
-from fesdic_core.fe.mesh import rectangle_mesh
-from fesdic_core.fe.mesh_io import write_mesh
 from fesdic_core.synthetic.motion import RigidMotion, StretchMotion
-from fesdic_core.synthetic.render import demo_cameras, render_stereo, speckle_mm_for
-from fesdic_core.synthetic.specimen import flat_plate
+from fesdic_core.synthetic.render import demo_cameras
 from fesdic_core.cameras.rig import write_cameras_json
 from georeg_app import cli
+from series_data import write_series
 
 pytestmark = pytest.mark.slow         # series measured end to end, Dask clusters
 
 #: the series: two translations (the second with a rotation), pure noise, a stretch
 MOTIONS = (RigidMotion((0.1, -0.05, 0.05)), RigidMotion((0.2, -0.1, 0.1), rvec=(0.0, 0.002, 0.0)),
            None, StretchMotion(0.005))
-MESH = dict(length_mm=44.0, width_mm=30.0, nx=4, ny=3, family="Q4")
 
 
 @pytest.fixture(scope="module")
 def series(tmp_path_factory):
     folder = tmp_path_factory.mktemp("series")
-    cameras = demo_cameras(image_size=(320, 240), field_mm=72.0)
-    plate = flat_plate(60.0, 40.0, speckle_mm=speckle_mm_for(cameras[0], 4.0), seed=3)
-
-    def save(arrays, stem):
-        for k, a in enumerate(arrays):
-            cv2.imwrite(str(folder / f"{stem}_cam{k}.png"), a.astype(np.uint8))
-
-    save(render_stereo(plate, cameras, noise_std=2.0, seed=1, progress=False), "ref")
-    rng = np.random.default_rng(5)
-    (folder / "frames").mkdir()
-    for i, motion in enumerate(MOTIONS, start=1):
-        arrays = ([rng.uniform(0, 255, (240, 320)) for _ in range(2)] if motion is None else
-                  render_stereo(plate, cameras, noise_std=2.0, seed=10 + i, progress=False,
-                                motion=motion))
-        save(arrays, f"frames/f{i}")
-    ref = folder / "shape_out"
-    ref.mkdir()
-    mesh = rectangle_mesh(MESH["length_mm"], MESH["width_mm"], MESH["nx"], MESH["ny"],
-                          family=MESH["family"])
-    write_mesh(ref / "fe.vtu", mesh)
-    write_cameras_json(ref / "fe_cameras.json", cameras)
-    (ref / "summary.json").write_text(json.dumps(
-        {"methods": [{"label": "FE", "status": "ok", "mesh_file": "fe.vtu"}]}))
+    cameras, mesh = write_series(folder, MOTIONS, frames="frames")
     write_cameras_json(folder / "cameras.json", cameras)
     return folder, mesh
 
