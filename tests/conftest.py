@@ -52,3 +52,11 @@ def family_scenes():
             cache[divisor] = scenes.family_scene(divisor)
         return cache[divisor]
     return get
+
+
+@pytest.fixture(scope="session")
+def dot_target_views():
+    """Eight rendered stereo views of a dot target with ring markers, and the true rig
+    (target_views.py)."""
+    import target_views
+    return target_views.render_views()

@@ -68,7 +68,8 @@ class Target:
             if np.any(m < 0) or np.any(m[:, 0] >= self.columns) or np.any(m[:, 1] >= self.rows):
                 raise ValueError(f"target markers must be (column, row) inside the "
                                  f"{self.columns} x {self.rows} grid, got {m.tolist()}")
-            if abs(np.cross(m[1] - m[0], m[2] - m[0])) < 1e-9:
+            a, b = m[1] - m[0], m[2] - m[0]
+            if abs(a[0] * b[1] - a[1] * b[0]) < 1e-9:
                 raise ValueError(f"target markers {m[:3].tolist()} are collinear: they cannot "
                                  "orient the grid")
         if self.kind == "charuco" and not (self.marker_mm and 0 < self.marker_mm < self.pitch_mm):
