@@ -24,6 +24,8 @@ default in parentheses)::
     distortion = "k1k2p1p2k3"      # "k1" | "k1k2" | "k1k2k3" | "k1k2p1p2" | "k1k2p1p2k3"
     fix_principal_point = false    # at the image centre                       (false)
     fix_aspect = false             # fy / fx fixed at 1                        (false)
+    refine_target = false          # estimate the target's points too: a target as printed,
+                                   # not as drawn (its deviations in summary.json) (false)
 
     [compare]                      # optional: another tool's calibration of the same rig,
     vic3d = "cal.xml"              # one key as in `georeg measure`'s [cameras] (file, opencv,
@@ -123,7 +125,8 @@ def model_table(data: Any, source: Path) -> CalibrationModel:
                           default=d.distortion),
         fix_principal_point=t.take("fix_principal_point", boolean, "true or false",
                                    default=d.fix_principal_point),
-        fix_aspect=t.take("fix_aspect", boolean, "true or false", default=d.fix_aspect))
+        fix_aspect=t.take("fix_aspect", boolean, "true or false", default=d.fix_aspect),
+        refine_target=t.take("refine_target", boolean, "true or false", default=d.refine_target))
     t.finish()
     return model
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from fesdic_core.cameras.camera import Camera
 from fesdic_core.cameras.rig import CalibrationError
+from fesdic_core.cameras.targets.bundle import gauge_mask, released_bundle
 from fesdic_core.cameras.targets.covariance import (INTRINSIC_NAMES, circle_centre_bias,
                                                      epipolar_distances, stereo_covariance)
 from fesdic_core.cameras.targets.target import Detection, Target
@@ -56,12 +57,15 @@ MIN_POINTS = 8              # points a view needs (not all on a line)
 
 @dataclass(frozen=True)
 class CalibrationModel:
-    """What is estimated: ``distortion`` (a key of :data:`DISTORTION_MODELS`), and whether the
-    principal point and the aspect ratio ``fy / fx`` are fixed (at the image centre and 1)."""
+    """What is estimated: ``distortion`` (a key of :data:`DISTORTION_MODELS`), whether the
+    principal point and the aspect ratio ``fy / fx`` are fixed (at the image centre and 1), and
+    whether the target's points are estimated too (``refine_target``: a target as printed,
+    :mod:`~fesdic_core.cameras.targets.bundle`)."""
 
     distortion: str = "k1k2p1p2k3"
     fix_principal_point: bool = False
     fix_aspect: bool = False
+    refine_target: bool = False
 
     def __post_init__(self) -> None:
         if self.distortion not in DISTORTION_MODELS:
@@ -118,6 +122,9 @@ class StereoCalibration:
     epipolar_px : (m, 2) every used target point's epipolar distance, both ways.
     views : one :class:`ViewReport` per pair of images.
     residuals : per used view, (points (m, 2) px of camera 0 and 1, residual vectors).
+    bias_corrected : whether the circle centres' perspective bias was subtracted.
+    target_deviation_mm : (N, 3) the target's points as estimated minus as drawn
+        (``refine_target``), else None.
     """
 
     cameras: tuple[Camera, Camera]
@@ -128,6 +135,7 @@ class StereoCalibration:
     views: tuple[ViewReport, ...] = ()
     residuals: tuple = field(default=(), repr=False)
     bias_corrected: bool = False
+    target_deviation_mm: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def baseline_mm(self) -> float:
@@ -212,6 +220,22 @@ def _intrinsics(detections: Sequence[Detection], target: Target, size, model: Ca
             elif bad_p.any():
                 keep[v] = keep[v][~bad_p]
     return K, np.asarray(dist, float).ravel()[:5], keep, reasons
+
+
+def _anchors(target: Target, common: dict) -> list[int]:
+    """Three points for the target's gauge, seen in every used view: a dot grid's ring
+    markers, else the three most seen of the grid's corners."""
+    grid = target.grid
+    if target.kind == "dots":
+        return [int(np.argmin(np.linalg.norm(grid - m, axis=1))) for m in target.markers[:3]]
+    seen = np.zeros(len(grid), int)
+    for ids in common.values():
+        seen[ids] += 1
+    lo, hi = grid.min(axis=0), grid.max(axis=0)
+    corners = [int(np.argmin(np.linalg.norm(grid - c, axis=1))) for c in
+               (lo, (hi[0], lo[1]), (lo[0], hi[1]), hi)]
+    corners.sort(key=lambda i: -seen[i])
+    return corners[:3]
 
 
 def _why(reasons: dict, detections) -> str:
@@ -303,9 +327,25 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
             continue
         break
     free = model.free
-    cov, sigma, _ = stereo_covariance([o.reshape(-1, 3) for o in objects],
-                                      [p.reshape(-1, 2) for p in px0], [p.reshape(-1, 2) for p in px1],
-                                      K, dist, R, T, rvecs, tvecs, free, tie_aspect=model.fix_aspect)
+    target_deviation = None
+    if model.refine_target:
+        grid_points = target.object_points()
+        bundle = released_bundle(grid_points, [common[v] for v in views],
+                                 [p.reshape(-1, 2) for p in px0], [p.reshape(-1, 2) for p in px1],
+                                 K, dist, R, T, rvecs, tvecs, free,
+                                 gauge_mask(len(grid_points), _anchors(target, common)),
+                                 tie_aspect=model.fix_aspect)
+        K, dist, R, T = bundle.K, bundle.dist, bundle.R, bundle.T
+        res0 = [r[0] for r in bundle.residuals]
+        res1 = [r[1] for r in bundle.residuals]
+        cov, sigma = bundle.cov, bundle.sigma_px
+        target_deviation = bundle.points - grid_points
+    else:
+        cov, sigma, _ = stereo_covariance([o.reshape(-1, 3) for o in objects],
+                                          [p.reshape(-1, 2) for p in px0],
+                                          [p.reshape(-1, 2) for p in px1],
+                                          K, dist, R, T, rvecs, tvecs, free,
+                                          tie_aspect=model.fix_aspect)
     std_all = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     names = [n for n, f in zip(INTRINSIC_NAMES, free) if f]
     n = len(names)
@@ -338,7 +378,8 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
     all_res = np.vstack([np.vstack([a, b]) for a, b in zip(res0, res1)])
     result = StereoCalibration(cameras=(cam0, cam1), std=std, rms_px=_rms(all_res),
                                sigma_px=sigma, epipolar_px=epi, views=tuple(rows),
-                               residuals=tuple(residuals), bias_corrected=bias_corrected)
+                               residuals=tuple(residuals), bias_corrected=bias_corrected,
+                               target_deviation_mm=target_deviation)
     logger.info("stereo calibration: %d of %d views, RMS %.4f px, baseline %.3f mm, stereo angle "
                 "%.3f deg, median epipolar distance %.4f px", len(views), len(detections0),
                 result.rms_px, result.baseline_mm, result.stereo_angle_deg, float(np.median(epi)))
