@@ -67,7 +67,9 @@ def calibration_summary(run: CalibrationRun) -> dict:
                           fix_principal_point=cfg.model.fix_principal_point,
                           fix_aspect=cfg.model.fix_aspect, refine_target=cfg.model.refine_target),
             "views": views, "views_used": used, "views_total": len(cal.views),
-            "reprojection_rms_px": cal.rms_px, "residual_sigma_px": cal.sigma_px,
+            "reprojection_rms_px": cal.rms_px,
+            "reprojection_rms_per_coordinate_px": cal.rms_px / np.sqrt(2.0),   # OpenCV's figure
+            "residual_sigma_px": cal.sigma_px,
             "epipolar_px": dict(median=float(np.median(epi)), rms=float(np.sqrt(np.mean(epi ** 2))),
                                 max=float(np.max(epi))),
             "circle_centre_bias_corrected": cal.bias_corrected,
