@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -125,8 +126,24 @@ def _gray8(values: np.ndarray) -> np.ndarray:
         np.round(255.0 * (v - lo) / (hi - lo)).astype(np.uint8)
 
 
+def _spread(keypoints: Sequence, shape: tuple[int, int], cells: int, quota: int) -> list:
+    """The ``quota`` strongest keypoints of each of ``cells x cells`` tiles of an image of
+    ``shape`` (h, w): features spread over the image, not only where the contrast is best."""
+    if not keypoints:
+        return []
+    xy = np.array([k.pt for k in keypoints])
+    response = np.array([k.response for k in keypoints])
+    tile = (np.minimum((xy[:, 1] * cells / shape[0]).astype(int), cells - 1) * cells
+            + np.minimum((xy[:, 0] * cells / shape[1]).astype(int), cells - 1))
+    order = np.lexsort((-response, tile))                      # by tile, strongest first
+    first = np.searchsorted(tile[order], tile[order], side="left")
+    rank = np.arange(len(order)) - first
+    return [keypoints[i] for i in order[rank < quota]]
+
+
 def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray | None = None,
-                   max_features: int = 5000) -> tuple[np.ndarray, np.ndarray, int]:
+                   max_features: int = 5000, spread_cells: int = 0
+                   ) -> tuple[np.ndarray, np.ndarray, int]:
     """SIFT matches of image 0 (inside ``mask0``) in image 1, Lowe's ratio test.
 
     Parameters
@@ -134,16 +151,28 @@ def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray |
     values0, values1 : (h, w) gray levels of the two images.
     mask0 : (h, w) bool, where features of image 0 are looked for (None: everywhere).
     max_features : at most this many features per image.
+    spread_cells : 0: the ``max_features`` strongest of each image; ``k > 0``: the
+        ``max_features / k**2`` strongest of each of ``k x k`` tiles of each image (features
+        where the contrast is weaker too, e.g. under uneven lighting).
 
     Returns
     -------
     px0, px1 : (n, 2) matched pixels (x = column, y = row).
     n_features : the features found in image 0 (inside the mask).
     """
-    sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
     m0 = None if mask0 is None else np.asarray(mask0, bool).astype(np.uint8) * 255
-    k0, d0 = sift.detectAndCompute(_gray8(values0), m0)
-    k1, d1 = sift.detectAndCompute(_gray8(values1), None)
+    if spread_cells > 0:
+        sift = cv2.SIFT_create()  # type: ignore[attr-defined]
+        quota = int(np.ceil(max_features / spread_cells ** 2))
+        images = [_gray8(values0), _gray8(values1)]
+        k0 = _spread(sift.detect(images[0], m0), images[0].shape, spread_cells, quota)
+        k1 = _spread(sift.detect(images[1], None), images[1].shape, spread_cells, quota)
+        k0, d0 = sift.compute(images[0], k0) if k0 else ((), None)
+        k1, d1 = sift.compute(images[1], k1) if k1 else ((), None)
+    else:
+        sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
+        k0, d0 = sift.detectAndCompute(_gray8(values0), m0)
+        k1, d1 = sift.detectAndCompute(_gray8(values1), None)
     if d0 is None or d1 is None or len(k0) < 2 or len(k1) < 2:
         return np.zeros((0, 2)), np.zeros((0, 2)), len(k0)
     pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(d0, d1, k=2)
@@ -155,7 +184,8 @@ def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray |
 
 def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.ndarray,
                   mask0: np.ndarray | None = None,
-                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX) -> StereoPoints:
+                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX, max_features: int = 5000,
+                  spread_cells: int = 0) -> StereoPoints:
     """Matches inside ``mask0`` that agree with the calibrated epipolar geometry, triangulated.
 
     Parameters
@@ -164,12 +194,13 @@ def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.n
     values0, values1 : (h, w) gray levels of camera 0's and camera 1's images.
     mask0 : (h, w) bool, the region of camera 0's image to match (None: all).
     max_epipolar_px : matches farther from their epipolar line (px) are dropped.
+    max_features, spread_cells : the features of each image (:func:`match_features`).
 
     Returns
     -------
     StereoPoints (possibly empty: the caller judges whether there are enough).
     """
-    px0, px1, n_features = match_features(values0, values1, mask0)
+    px0, px1, n_features = match_features(values0, values1, mask0, max_features, spread_cells)
     n = len(px0)
     if n == 0:
         logger.info("stereo matches: %d features in camera 0, no match", n_features)

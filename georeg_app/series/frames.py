@@ -18,6 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from fesdic_core.displacement.driver import measure_displacement
+from fesdic_core.displacement.start import feature_start, start_residual_percent
 from fesdic_core.displacement.strain import surface_green_lagrange
 from fesdic_core.imaging.image import read_image
 
@@ -25,7 +26,7 @@ from georeg_app.series.reference import SeriesReference
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["FrameResult", "measure_frame", "chained_frame", "log_frame"]
+__all__ = ["FrameResult", "measure_frame", "frame_start", "chained_frame", "log_frame"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -46,6 +47,7 @@ class FrameResult:
     failure: str | None
     time_s: float
     start_frame: int
+    start: str = ""                 # where the starting field came from (:func:`frame_start`)
 
     @property
     def ok(self) -> bool:
@@ -62,12 +64,14 @@ def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
         images = [read_image(p, prefilter_px=reference.prefilter_px, order=reference.interpolation_order)
                   for p in paths]
         solver = copy.deepcopy(reference.solver)
+        U0, start = frame_start(reference, index, images, U0)
         m = measure_displacement(reference.displacement, images, solver, U0)
     except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
         failure = " ".join(str(err).split()) or type(err).__name__
         logger.info("frame %d failed: %s", index, failure)
         return FrameResult(index, names[0], names[1], None, None, None, float("nan"),
-                           float("nan"), 0, False, failure, time.perf_counter() - t0, start_frame)
+                           float("nan"), 0, False, failure, time.perf_counter() - t0, start_frame,
+                           reference.start)
     mesh = reference.displacement.mesh
     return FrameResult(index=index, cam0=names[0], cam1=names[1], U=m.U,
                        strain=surface_green_lagrange(mesh, m.U),
@@ -75,7 +79,36 @@ def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
                        residual_percent=float(m.residual_percent),
                        noise_percent=float(m.noise_percent), iterations=int(m.iterations),
                        converged=bool(m.converged), failure=m.failure,
-                       time_s=time.perf_counter() - t0, start_frame=start_frame)
+                       time_s=time.perf_counter() - t0, start_frame=start_frame, start=start)
+
+
+def frame_start(reference: SeriesReference, index: int, images: Sequence,
+                U_previous: np.ndarray | None) -> tuple[np.ndarray | None, str]:
+    """The starting field (n, 3) of a frame (None: zero) and where it comes from.
+
+    ``reference.start``: "zero"; "previous": ``U_previous`` (the last good frame's field in an
+    incremental series, else None); "features": the feature start
+    (:func:`~fesdic_core.displacement.start.feature_start`) or, if it has a lower residual at
+    the coarsest scale, ``U_previous`` (zero when None); the fallback when no features match.
+    """
+    if reference.start == "zero":
+        return None, "zero"
+    fallback = "previous" if U_previous is not None else "zero"
+    if reference.start == "previous" or reference.features is None:
+        return U_previous, fallback
+    found = feature_start(reference.features, images, reference.displacement.cameras)
+    if found.U is None:
+        logger.warning("frame %d start: %s; starting from %s", index, found.report.describe(),
+                       fallback)
+        return U_previous, fallback
+    other = np.zeros_like(found.U) if U_previous is None else U_previous
+    r_features, r_other = start_residual_percent(reference.displacement, images,
+                                                 [found.U, other])
+    chosen = "features" if not r_other < r_features else fallback
+    logger.info("frame %d start: features: %s; residual at scale %d %.3f%% (%s %.3f%%): "
+                "starting from %s", index, found.report.describe(),
+                reference.displacement.settings.scales[0], r_features, fallback, r_other, chosen)
+    return (found.U, chosen) if chosen == "features" else (U_previous, chosen)
 
 
 def log_frame(frame: FrameResult, total: int) -> None:

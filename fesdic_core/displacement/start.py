@@ -1,0 +1,398 @@
+"""A start for large motions: feature matches triangulated, fitted on the reference mesh.
+
+The displacement's Gauss-Newton (:mod:`fesdic_core.displacement.driver`) is local: from zero
+it converges only if the motion is within a few pixels of the coarsest image scale. For a
+larger motion the start comes from features (as VIC-3D's and DICe's seeds do):
+
+1. once per series (:func:`feature_reference`), SIFT matches of the reference pair inside the
+   specimen's image, checked against the calibrated epipolar geometry and triangulated
+   (:func:`fesdic_core.cameras.triangulation.stereo_points`); each point kept is tied to the
+   integration point of the reference surface nearest in camera 0 (its element and parent
+   coordinates: a row of the quadrature's shape functions ``L``) and must lie on the
+   surface;
+2. per deformed pair (:func:`feature_start`), the same features matched from each camera's
+   reference image into its deformed image (:func:`~fesdic_core.cameras.triangulation.
+   match_features`, then RANSAC on a homography per camera to drop gross outliers), paired
+   through the reference stereo match (a point tracked ref-cam0 -> def-cam0 and
+   ref-cam1 -> def-cam1), checked against the epipolar geometry of the deformed pair and
+   triangulated: sparse 3-D displacements ``d_i = Y_i - X_i``;
+3. a robust smooth fit of those on the mesh (:func:`fit_field`): an affine field plus a
+   nodal field ``V`` regularized by the surface-gradient operator ``A`` of Eq. 10,
+
+       min  sum_i w_i |B [X_i, 1] + L_i V - d_i|^2 + lam V^T A V,
+
+   (``lam`` from a cosine of wavelength ``length_mm``,
+   :func:`~fesdic_core.solve.tikhonov.tikhonov_weight``), so that rigid motions and
+   homogeneous strains are reproduced exactly, nodes without features get a smooth value, and
+   points farther than ``trim`` robust deviations from the fit are dropped, refit until the
+   kept set stops changing (a trimmed least squares).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import cv2
+import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+from scipy.spatial import cKDTree
+
+from fesdic_core.cameras.triangulation import (epipolar_distance_px, match_features,
+                                               stereo_points, triangulate)
+from fesdic_core.displacement.driver import DisplacementReference
+from fesdic_core.displacement.residual import displacement_residual
+from fesdic_core.fe.mesh import element_areas
+from fesdic_core.imaging.image import Image, pyramid
+from fesdic_core.solve.tikhonov import surface_gradient_operator, tikhonov_weight
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["StartSettings", "FeatureReference", "StartReport", "FeatureStart", "FieldFit",
+           "feature_reference", "feature_start", "fit_field", "start_residual_percent"]
+
+
+@dataclass(frozen=True)
+class StartSettings:
+    """How the feature start is made.
+
+    max_features, spread_cells : SIFT features per image, the strongest of each of
+        ``spread_cells x spread_cells`` tiles (:func:`match_features`: a specimen lit
+        unevenly still gets features everywhere).
+    ransac_px : RANSAC threshold (px) of the homography of each camera (reference to
+        deformed); a deforming specimen is not a homography, so this is generous: it drops
+        gross mismatches only, the robust fit the rest.
+    max_epipolar_px : the deformed pair's matches farther from their epipolar line are dropped
+        (the reference pair's: :data:`~fesdic_core.cameras.triangulation.DEFAULT_MAX_EPIPOLAR_PX`).
+    pair_px : two keypoints of camera 1's reference image (from the stereo and the temporal
+        matching) are the same feature within this distance (px).
+    surface_px : a reference stereo point farther than this (in camera 0's pixels at the
+        specimen) from the reference surface is dropped.
+    length_mm : wavelength (mm) ruled equally by the points and the smoothing (None: twice
+        the median element size).
+    trim : points farther from the fit than this many robust deviations are outliers.
+    floor_px : the robust deviation is at least this (px at the specimen): a start needs to be
+        right within a pixel or so, and a smooth fit of a strained field misses some points
+        by a fraction of a pixel that is no outlier.
+    max_refits : at most this many fits of the trimmed least squares.
+    min_points : fewer tracked points than this give no start.
+    """
+
+    max_features: int = 8000
+    spread_cells: int = 8
+    ransac_px: float = 80.0
+    max_epipolar_px: float = 2.0
+    pair_px: float = 0.5
+    surface_px: float = 4.0
+    length_mm: float | None = None
+    trim: float = 3.0
+    floor_px: float = 0.5
+    max_refits: int = 10
+    min_points: int = 12
+
+    def __post_init__(self):
+        for name in ("ransac_px", "max_epipolar_px", "pair_px", "surface_px", "trim",
+                     "floor_px"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"StartSettings.{name} must be a positive number, got {value!r}")
+        if self.length_mm is not None and not (np.isfinite(self.length_mm) and self.length_mm > 0):
+            raise ValueError(f"StartSettings.length_mm must be positive or None, got "
+                             f"{self.length_mm!r}")
+        if self.min_points < 4 or self.max_refits < 1 or self.max_features < 10:
+            raise ValueError("StartSettings: min_points >= 4, max_refits >= 1 and "
+                             "max_features >= 10 are needed")
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureReference:
+    """The reference pair's features on the surface: built once per series.
+
+    Attributes
+    ----------
+    px0, px1 : (m, 2) the features' pixels (x = column, y = row) in the reference images.
+    X_mm : (m, 3) their triangulated positions (world frame).
+    basis : (m, n) csr, the shape functions of the mesh at each feature's surface point.
+    mask0, mask1 : (h, w) bool, the specimen's pixels in each reference image.
+    mm_per_px : size of a pixel at the specimen (mm, camera 0).
+    gradient : (n, n) csr, the surface-gradient operator ``A`` of the mesh (Eq. 10).
+    nodes : (n, 3) the reference surface's nodes (mm).
+    length_mm : the smoothing's wavelength (mm).
+    n_stereo : stereo points of the reference pair before the surface check.
+    values : the two reference images' gray levels ((h, w) each), matched in every frame.
+    """
+
+    px0: np.ndarray
+    px1: np.ndarray
+    X_mm: np.ndarray
+    basis: sps.csr_matrix = field(repr=False)
+    mask0: np.ndarray = field(repr=False)
+    mask1: np.ndarray = field(repr=False)
+    mm_per_px: float
+    gradient: sps.csr_matrix = field(repr=False)
+    nodes: np.ndarray = field(repr=False)
+    length_mm: float
+    n_stereo: int
+    values: tuple = field(repr=False, default=())
+
+    @property
+    def n_points(self) -> int:
+        return len(self.X_mm)
+
+
+@dataclass(frozen=True)
+class StartReport:
+    """What the feature start of one deformed pair gave.
+
+    matches : (cam0, cam1) matches of the reference features in the deformed image.
+    inliers : (cam0, cam1) of those, the RANSAC inliers.
+    points : tracked in both cameras and consistent with the deformed pair's epipolar line.
+    kept : points the robust fit kept.
+    rms_mm : RMS misfit (mm) of the kept points to the fitted field.
+    median_mm : median displacement magnitude (mm) of the kept points.
+    failure : why there is no start (None: a start).
+    """
+
+    matches: tuple[int, int] = (0, 0)
+    inliers: tuple[int, int] = (0, 0)
+    points: int = 0
+    kept: int = 0
+    rms_mm: float = float("nan")
+    median_mm: float = float("nan")
+    failure: str | None = None
+
+    def describe(self) -> str:
+        """One line for the log."""
+        head = (f"matches {self.matches[0]} / {self.matches[1]} (RANSAC inliers "
+                f"{self.inliers[0]} / {self.inliers[1]}), {self.points} points in both cameras")
+        if self.failure is not None:
+            return f"{head}: no start ({self.failure})"
+        return (f"{head}, {self.kept} kept, RMS misfit {self.rms_mm * 1e3:.1f} um, median "
+                f"displacement {self.median_mm:.3g} mm")
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureStart:
+    """A starting field ``U`` (n, 3) mm (None if the start failed) and its report."""
+
+    U: np.ndarray | None
+    report: StartReport
+
+
+@dataclass(frozen=True, eq=False)
+class FieldFit:
+    """A robust smooth fit: ``U`` (n, 3) at the nodes, ``kept`` (m,) bool the inliers,
+    ``misfit_mm`` (m,) each point's distance to the fit, ``refits`` the fits made."""
+
+    U: np.ndarray
+    kept: np.ndarray
+    misfit_mm: np.ndarray
+    refits: int
+
+    @property
+    def rms_mm(self) -> float:
+        return float(np.sqrt(np.mean(self.misfit_mm[self.kept] ** 2))) if self.kept.any() \
+            else float("nan")
+
+
+def _pixel_mask(px: np.ndarray, shape: tuple[int, int], dilate_px: int = 2) -> np.ndarray:
+    """(h, w) bool: the pixels ``px`` (k, 2) fall in, dilated by ``dilate_px``."""
+    mask = np.zeros(shape, np.uint8)
+    ij = np.round(px).astype(np.intp)
+    ok = (ij[:, 0] >= 0) & (ij[:, 0] < shape[1]) & (ij[:, 1] >= 0) & (ij[:, 1] < shape[0])
+    mask[ij[ok, 1], ij[ok, 0]] = 1
+    size = 2 * dilate_px + 1
+    return cv2.dilate(mask, np.ones((size, size), np.uint8)).astype(bool)
+
+
+def _element_size_mm(reference: DisplacementReference) -> float:
+    return float(np.sqrt(np.median(np.concatenate(element_areas(reference.mesh)))))
+
+
+def feature_reference(reference: DisplacementReference,
+                      settings: StartSettings = StartSettings()) -> FeatureReference:
+    """The reference pair's features on the reference surface (once per series).
+
+    Parameters
+    ----------
+    reference : the displacement reference (surface, cameras, reference pair; the
+        quadrature of its finest scale places the features on the surface).
+    settings : :class:`StartSettings`.
+
+    Returns
+    -------
+    FeatureReference (possibly with no point: :func:`feature_start` then reports why).
+    """
+    view = reference.view(reference.settings.scales[-1])
+    cam0, cam1 = reference.cameras
+    im0, im1 = reference.images
+    masks, projections = [], []
+    for c, (cam, im) in enumerate(zip(reference.cameras, reference.images)):
+        px = cam.project(view.X[view.seen[c]])
+        projections.append(px)
+        masks.append(_pixel_mask(px, im.shape))
+    mm_per_px = float(np.median(cam0.depth(view.X)) / cam0.K[0, 0])
+    stereo = stereo_points(cam0, cam1, im0.values, im1.values, masks[0],
+                           max_features=settings.max_features, spread_cells=settings.spread_cells)
+    seen0 = np.flatnonzero(view.seen[0])
+    dist, nearest = cKDTree(projections[0]).query(stereo.px0, distance_upper_bound=1.5 * 2.0 **
+                                                  reference.settings.scales[-1])
+    on_mesh = np.isfinite(dist)
+    g = seen0[np.where(on_mesh, nearest, 0)]
+    off = np.linalg.norm(stereo.xyz_mm - view.X[g], axis=1)
+    keep = on_mesh & (off <= settings.surface_px * mm_per_px)
+    length = settings.length_mm if settings.length_mm is not None \
+        else 2.0 * _element_size_mm(reference)
+    logger.info("feature start: %d reference stereo points, %d on the surface's image, %d within "
+                "%.2g mm of the surface (pixel %.3g mm, smoothing length %.3g mm)",
+                stereo.n_points, int(on_mesh.sum()), int(keep.sum()),
+                settings.surface_px * mm_per_px, mm_per_px, length)
+    return FeatureReference(px0=stereo.px0[keep], px1=stereo.px1[keep], X_mm=stereo.xyz_mm[keep],
+                            basis=sps.csr_matrix(view.quad.L[g[keep]]), mask0=masks[0],
+                            mask1=masks[1], mm_per_px=mm_per_px,
+                            gradient=surface_gradient_operator(reference.mesh),
+                            nodes=np.asarray(reference.mesh.nodes, float), length_mm=float(length),
+                            n_stereo=stereo.n_points, values=(im0.values, im1.values))
+
+
+def _tracked(ref_values: np.ndarray, def_values: np.ndarray, mask: np.ndarray,
+             settings: StartSettings) -> tuple[np.ndarray, np.ndarray, int]:
+    """One camera's matches reference -> deformed, the RANSAC inliers of a homography:
+    (k, 2) reference pixels, (k, 2) deformed pixels, the matches before RANSAC."""
+    a, b, _ = match_features(ref_values, def_values, mask, settings.max_features,
+                             settings.spread_cells)
+    if len(a) < 4:
+        return a[:0], b[:0], len(a)
+    _, inlier = cv2.findHomography(a, b, cv2.RANSAC, settings.ransac_px, maxIters=5000,
+                                   confidence=0.999)
+    keep = np.zeros(len(a), bool) if inlier is None else inlier.ravel().astype(bool)
+    return a[keep], b[keep], len(a)
+
+
+def _follow(reference_px: np.ndarray, tracked_ref: np.ndarray, tracked_def: np.ndarray,
+            tol_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of ``reference_px`` (m, 2) went: the deformed pixel of the tracked feature
+    at the same reference pixel (within ``tol_px``); (m, 2) and (m,) bool found."""
+    if len(tracked_ref) == 0:
+        return np.zeros_like(reference_px), np.zeros(len(reference_px), bool)
+    dist, k = cKDTree(tracked_ref).query(reference_px, distance_upper_bound=tol_px)
+    found = np.isfinite(dist)
+    return tracked_def[np.where(found, k, 0)], found
+
+
+def feature_start(features: FeatureReference, images: Sequence[Image], cameras: Sequence,
+                  settings: StartSettings = StartSettings()) -> FeatureStart:
+    """The starting field of a deformed pair from the reference features.
+
+    Parameters
+    ----------
+    features : :func:`feature_reference` of the series.
+    images : the two deformed full-resolution images (cam0, cam1).
+    cameras : the two calibrated cameras (full resolution).
+    settings : :class:`StartSettings` (as for :func:`feature_reference`).
+
+    Returns
+    -------
+    FeatureStart: ``U`` (n, 3) mm on the reference nodes, or None with the report's failure.
+    """
+    cam0, cam1 = cameras
+    if len(features.values) != 2:
+        raise ValueError("feature_start: a FeatureReference without its reference images")
+    a0, b0, m0 = _tracked(features.values[0], images[0].values, features.mask0, settings)
+    a1, b1, m1 = _tracked(features.values[1], images[1].values, features.mask1, settings)
+    q0, found0 = _follow(features.px0, a0, b0, settings.pair_px)
+    q1, found1 = _follow(features.px1, a1, b1, settings.pair_px)
+    both = np.flatnonzero(found0 & found1)
+    if both.size:
+        both = both[epipolar_distance_px(cam0, cam1, q0[both], q1[both])
+                    <= settings.max_epipolar_px]
+    Y, _ = triangulate(cam0, cam1, q0[both], q1[both])
+    counts = dict(matches=(m0, m1), inliers=(len(a0), len(a1)), points=int(both.size))
+    if both.size < settings.min_points:
+        report = StartReport(**counts, failure=f"{both.size} points tracked in both cameras, "
+                                               f"at least {settings.min_points} needed")
+        return FeatureStart(None, report)
+    d = Y - features.X_mm[both]
+    length = features.length_mm if settings.length_mm is None else settings.length_mm
+    fit = fit_field(features.basis[both], features.X_mm[both], d, features.gradient,
+                    features.nodes, length, settings.trim, settings.max_refits,
+                    floor_mm=settings.floor_px * features.mm_per_px)
+    median = float(np.median(np.linalg.norm(d[fit.kept], axis=1)))
+    report = StartReport(**counts, kept=int(fit.kept.sum()), rms_mm=fit.rms_mm, median_mm=median)
+    return FeatureStart(fit.U, report)
+
+
+def _solve_smooth(basis: sps.csr_matrix, weights: np.ndarray, rhs: np.ndarray,
+                  gradient: sps.csr_matrix, nodes: np.ndarray, length_mm: float) -> np.ndarray:
+    """``V`` (n, 3) minimising ``sum_i w_i |L_i V - rhs_i|^2 + lam V^T A V`` (+ a tiny ridge
+    for the nodes of a part without points)."""
+    LtW = basis.T.multiply(weights).tocsr()
+    H = (LtW @ basis).tocsr()
+    lam = tikhonov_weight(H, gradient, nodes, length_mm)
+    ridge = 1e-9 * float(H.diagonal().max(initial=1.0))
+    M = (H + lam * gradient + ridge * sps.identity(len(nodes))).tocsc()
+    return spla.splu(M).solve(np.asarray(LtW @ rhs))
+
+
+def fit_field(basis: sps.csr_matrix, X_mm: np.ndarray, d_mm: np.ndarray,
+              gradient: sps.csr_matrix, nodes: np.ndarray, length_mm: float, trim: float = 3.0,
+              max_refits: int = 10, floor_mm: float = 0.0) -> FieldFit:
+    """Robust smooth fit of sparse displacements on the mesh (trimmed least squares).
+
+    The field is an affine part ``B [X, 1]`` (exact for rigid motions and homogeneous
+    strains) plus a nodal field ``V`` smoothed by the surface-gradient operator ``A``:
+    ``min sum_i w_i |B [X_i, 1] + L_i V - d_i|^2 + lam V^T A V``, solved by alternating
+    the affine part and ``V`` (a few passes per fit), ``w_i`` 1 for the kept points, 0 for
+    the others. After each fit the points farther than ``trim`` robust deviations
+    (1.4826 x the median misfit of the kept points, at least ``floor_mm``) are dropped; the
+    fit stops when the kept set no longer changes, or when it would keep fewer than half
+    the points (a field the model misses, not outliers: ``floor_mm`` sets what is no outlier).
+
+    Parameters
+    ----------
+    basis : (m, n) csr, shape functions of the mesh at each point.
+    X_mm : (m, 3) the points' reference positions (mm).
+    d_mm : (m, 3) their displacements (mm).
+    gradient : (n, n) the surface-gradient operator ``A`` of the mesh.
+    nodes : (n, 3) the mesh's nodes (mm).
+    length_mm : the smoothing's wavelength (mm, :func:`tikhonov_weight`).
+    trim, max_refits, floor_mm : the trimming (see above).
+
+    Returns
+    -------
+    FieldFit: ``U`` (n, 3) at the nodes, the inliers and misfits.
+    """
+    X, d = np.asarray(X_mm, float), np.asarray(d_mm, float)
+    centre = X.mean(axis=0)
+    P = np.column_stack([X - centre, np.ones(len(X))])                 # (m, 4)
+    Pn = np.column_stack([nodes - centre, np.ones(len(nodes))])
+    kept = np.ones(len(X), bool)
+    U = np.zeros((len(nodes), 3))
+    misfit = np.zeros(len(X))
+    refits = 0
+    for refits in range(1, max_refits + 1):
+        w = kept.astype(float)
+        V = np.zeros((len(nodes), 3))
+        for _ in range(4):                              # affine part and V, alternately
+            B = np.linalg.lstsq(P[kept], (d - basis @ V)[kept], rcond=1e-10)[0]
+            V = _solve_smooth(basis, w, d - P @ B, gradient, nodes, length_mm)
+        U = Pn @ B + V
+        misfit = np.linalg.norm(P @ B + basis @ V - d, axis=1)
+        scale = max(1.4826 * float(np.median(misfit[kept])), floor_mm)
+        new = misfit <= trim * scale
+        if np.array_equal(new, kept) or new.sum() < max(4, len(X) // 2):
+            break                 # (trimming half the points: a misfit of the model, not outliers)
+        kept = new
+    return FieldFit(U=U, kept=kept, misfit_mm=misfit, refits=refits)
+
+
+def start_residual_percent(reference: DisplacementReference, images: Sequence[Image],
+                           candidates: Sequence[np.ndarray]) -> list[float]:
+    """The residual (percent) of each candidate start ``U`` (n, 3) at the coarsest scale of
+    ``reference`` for the deformed full-resolution ``images`` (the better start is lower)."""
+    scale = reference.settings.scales[0]
+    view = reference.view(scale)
+    scaled = [pyramid(im, scale + 1)[scale] for im in images]
+    return [float(displacement_residual(U, view, scaled, reference.settings.normalisation,
+                                        jacobian=False).std_percent) for U in candidates]
