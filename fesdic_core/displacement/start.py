@@ -4,25 +4,26 @@ The displacement's Gauss-Newton (:mod:`fesdic_core.displacement.driver`) is loca
 it converges only if the motion is within a few pixels of the coarsest image scale. For a
 larger motion the start comes from features (as VIC-3D's and DICe's seeds do):
 
-1. once per series (:func:`feature_reference`), SIFT matches of the reference pair inside the
-   specimen's image, checked against the calibrated epipolar geometry and triangulated
-   (:func:`fesdic_core.cameras.triangulation.stereo_points`); each point kept is tied to the
-   integration point of the reference surface nearest in camera 0 (its element and parent
-   coordinates: a row of the quadrature's shape functions ``L``) and must lie on the
-   surface;
-2. per deformed pair (:func:`feature_start`), the same features matched from each camera's
-   reference image into its deformed image (:func:`~fesdic_core.cameras.triangulation.
-   match_features`, then RANSAC on a homography per camera to drop gross outliers), paired
-   through the reference stereo match (a point tracked ref-cam0 -> def-cam0 and
-   ref-cam1 -> def-cam1), checked against the epipolar geometry of the deformed pair and
-   triangulated: sparse 3-D displacements ``d_i = Y_i - X_i``;
+1. once per series (:func:`feature_reference`), SIFT features of each reference image
+   inside the surface's pixels, spread over tiles of the image
+   (:func:`~fesdic_core.cameras.triangulation.detect_features`), matched between the cameras,
+   checked against the calibrated epipolar geometry and triangulated (as
+   :func:`~fesdic_core.cameras.triangulation.stereo_points` does); each point kept is tied to
+   the integration point of the reference surface nearest in camera 0 (its element and parent
+   coordinates: a row of the quadrature's shape functions ``L``) and must lie on the surface;
+2. per deformed pair (:func:`feature_start`), each camera's reference features matched in
+   its deformed image (:func:`~fesdic_core.cameras.triangulation.match_descriptors`, then
+   RANSAC on a homography per camera to drop gross outliers), a stereo point followed
+   ref-cam0 -> def-cam0 and ref-cam1 -> def-cam1 (its two features), checked against the
+   epipolar geometry of the deformed pair and triangulated: sparse 3-D displacements
+   ``d_i = Y_i - X_i``;
 3. a robust smooth fit of those on the mesh (:func:`fit_field`): an affine field plus a
    nodal field ``V`` regularized by the surface-gradient operator ``A`` of Eq. 10,
 
        min  sum_i w_i |B [X_i, 1] + L_i V - d_i|^2 + lam V^T A V,
 
    (``lam`` from a cosine of wavelength ``length_mm``,
-   :func:`~fesdic_core.solve.tikhonov.tikhonov_weight``), so that rigid motions and
+   :func:`~fesdic_core.solve.tikhonov.tikhonov_weight`), so that rigid motions and
    homogeneous strains are reproduced exactly, nodes without features get a smooth value, and
    points farther than ``trim`` robust deviations from the fit are dropped, refit until the
    kept set stops changing (a trimmed least squares).
@@ -39,8 +40,9 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
-from fesdic_core.cameras.triangulation import (epipolar_distance_px, match_features,
-                                               stereo_points, triangulate)
+from fesdic_core.cameras.triangulation import (DEFAULT_MAX_EPIPOLAR_PX, Features,
+                                               detect_features, epipolar_distance_px,
+                                               match_descriptors, triangulate)
 from fesdic_core.displacement.driver import DisplacementReference
 from fesdic_core.displacement.residual import displacement_residual
 from fesdic_core.fe.mesh import element_areas
@@ -65,8 +67,6 @@ class StartSettings:
         gross mismatches only, the robust fit the rest.
     max_epipolar_px : the deformed pair's matches farther from their epipolar line are dropped
         (the reference pair's: :data:`~fesdic_core.cameras.triangulation.DEFAULT_MAX_EPIPOLAR_PX`).
-    pair_px : two keypoints of camera 1's reference image (from the stereo and the temporal
-        matching) are the same feature within this distance (px).
     surface_px : a reference stereo point farther than this (in camera 0's pixels at the
         specimen) from the reference surface is dropped.
     length_mm : wavelength (mm) ruled equally by the points and the smoothing (None: twice
@@ -83,7 +83,6 @@ class StartSettings:
     spread_cells: int = 8
     ransac_px: float = 80.0
     max_epipolar_px: float = 2.0
-    pair_px: float = 0.5
     surface_px: float = 4.0
     length_mm: float | None = None
     trim: float = 3.0
@@ -92,7 +91,7 @@ class StartSettings:
     min_points: int = 12
 
     def __post_init__(self):
-        for name in ("ransac_px", "max_epipolar_px", "pair_px", "surface_px", "trim",
+        for name in ("ransac_px", "max_epipolar_px", "surface_px", "trim",
                      "floor_px"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -111,30 +110,28 @@ class FeatureReference:
 
     Attributes
     ----------
-    px0, px1 : (m, 2) the features' pixels (x = column, y = row) in the reference images.
-    X_mm : (m, 3) their triangulated positions (world frame).
-    basis : (m, n) csr, the shape functions of the mesh at each feature's surface point.
-    mask0, mask1 : (h, w) bool, the specimen's pixels in each reference image.
+    features : the SIFT features of each reference image inside the specimen's pixels.
+    index0, index1 : (m,) the stereo points' features in each camera (indices of
+        ``features``): camera 0's ``index0[i]`` matches camera 1's ``index1[i]``.
+    X_mm : (m, 3) the stereo points' triangulated positions (world frame).
+    basis : (m, n) csr, the shape functions of the mesh at each point's place on the surface.
     mm_per_px : size of a pixel at the specimen (mm, camera 0).
     gradient : (n, n) csr, the surface-gradient operator ``A`` of the mesh (Eq. 10).
     nodes : (n, 3) the reference surface's nodes (mm).
     length_mm : the smoothing's wavelength (mm).
     n_stereo : stereo points of the reference pair before the surface check.
-    values : the two reference images' gray levels ((h, w) each), matched in every frame.
     """
 
-    px0: np.ndarray
-    px1: np.ndarray
+    features: tuple[Features, Features] = field(repr=False)
+    index0: np.ndarray
+    index1: np.ndarray
     X_mm: np.ndarray
     basis: sps.csr_matrix = field(repr=False)
-    mask0: np.ndarray = field(repr=False)
-    mask1: np.ndarray = field(repr=False)
     mm_per_px: float
     gradient: sps.csr_matrix = field(repr=False)
     nodes: np.ndarray = field(repr=False)
     length_mm: float
     n_stereo: int
-    values: tuple = field(repr=False, default=())
 
     @property
     def n_points(self) -> int:
@@ -214,6 +211,10 @@ def feature_reference(reference: DisplacementReference,
                       settings: StartSettings = StartSettings()) -> FeatureReference:
     """The reference pair's features on the reference surface (once per series).
 
+    SIFT features of each reference image inside the surface's pixels, matched between the
+    cameras, the matches within :data:`DEFAULT_MAX_EPIPOLAR_PX` of their epipolar line
+    triangulated, and those within ``settings.surface_px`` of the surface kept.
+
     Parameters
     ----------
     reference : the displacement reference (surface, cameras, reference pair; the
@@ -226,64 +227,63 @@ def feature_reference(reference: DisplacementReference,
     """
     view = reference.view(reference.settings.scales[-1])
     cam0, cam1 = reference.cameras
-    im0, im1 = reference.images
-    masks, projections = [], []
+    features, projections = [], []
     for c, (cam, im) in enumerate(zip(reference.cameras, reference.images)):
         px = cam.project(view.X[view.seen[c]])
         projections.append(px)
-        masks.append(_pixel_mask(px, im.shape))
+        features.append(detect_features(im.values, _pixel_mask(px, im.shape),
+                                        settings.max_features, settings.spread_cells))
     mm_per_px = float(np.median(cam0.depth(view.X)) / cam0.K[0, 0])
-    stereo = stereo_points(cam0, cam1, im0.values, im1.values, masks[0],
-                           max_features=settings.max_features, spread_cells=settings.spread_cells)
+    i0, i1 = match_descriptors(features[0], features[1])
+    px0, px1 = features[0].px[i0], features[1].px[i1]
+    epipolar = epipolar_distance_px(cam0, cam1, px0, px1) <= DEFAULT_MAX_EPIPOLAR_PX
+    X, _ = triangulate(cam0, cam1, px0[epipolar], px1[epipolar])
+    i0, i1, px0 = i0[epipolar], i1[epipolar], px0[epipolar]
     seen0 = np.flatnonzero(view.seen[0])
-    dist, nearest = cKDTree(projections[0]).query(stereo.px0, distance_upper_bound=1.5 * 2.0 **
-                                                  reference.settings.scales[-1])
+    dist, nearest = cKDTree(projections[0]).query(
+        px0, distance_upper_bound=1.5 * 2.0 ** reference.settings.scales[-1])
     on_mesh = np.isfinite(dist)
     g = seen0[np.where(on_mesh, nearest, 0)]
-    off = np.linalg.norm(stereo.xyz_mm - view.X[g], axis=1)
-    keep = on_mesh & (off <= settings.surface_px * mm_per_px)
+    keep = on_mesh & (np.linalg.norm(X - view.X[g], axis=1) <= settings.surface_px * mm_per_px)
     length = settings.length_mm if settings.length_mm is not None \
         else 2.0 * _element_size_mm(reference)
-    logger.info("feature start: %d reference stereo points, %d on the surface's image, %d within "
-                "%.2g mm of the surface (pixel %.3g mm, smoothing length %.3g mm)",
-                stereo.n_points, int(on_mesh.sum()), int(keep.sum()),
+    logger.info("feature start: %d / %d features in the reference images, %d stereo matches, "
+                "%d on their epipolar line, %d on the surface (within %.2g mm; pixel %.3g mm, "
+                "smoothing length %.3g mm)", len(features[0]), len(features[1]),
+                int(epipolar.size), int(epipolar.sum()), int(keep.sum()),
                 settings.surface_px * mm_per_px, mm_per_px, length)
-    return FeatureReference(px0=stereo.px0[keep], px1=stereo.px1[keep], X_mm=stereo.xyz_mm[keep],
-                            basis=sps.csr_matrix(view.quad.L[g[keep]]), mask0=masks[0],
-                            mask1=masks[1], mm_per_px=mm_per_px,
+    return FeatureReference(features=(features[0], features[1]), index0=i0[keep],
+                            index1=i1[keep], X_mm=X[keep],
+                            basis=sps.csr_matrix(view.quad.L[g[keep]]), mm_per_px=mm_per_px,
                             gradient=surface_gradient_operator(reference.mesh),
                             nodes=np.asarray(reference.mesh.nodes, float), length_mm=float(length),
-                            n_stereo=stereo.n_points, values=(im0.values, im1.values))
+                            n_stereo=int(epipolar.sum()))
 
 
-def _tracked(ref_values: np.ndarray, def_values: np.ndarray, mask: np.ndarray,
-             settings: StartSettings) -> tuple[np.ndarray, np.ndarray, int]:
-    """One camera's matches reference -> deformed, the RANSAC inliers of a homography:
-    (k, 2) reference pixels, (k, 2) deformed pixels, the matches before RANSAC."""
-    a, b, _ = match_features(ref_values, def_values, mask, settings.max_features,
-                             settings.spread_cells)
-    if len(a) < 4:
-        return a[:0], b[:0], len(a)
-    _, inlier = cv2.findHomography(a, b, cv2.RANSAC, settings.ransac_px, maxIters=5000,
-                                   confidence=0.999)
-    keep = np.zeros(len(a), bool) if inlier is None else inlier.ravel().astype(bool)
-    return a[keep], b[keep], len(a)
-
-
-def _follow(reference_px: np.ndarray, tracked_ref: np.ndarray, tracked_def: np.ndarray,
-            tol_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where each of ``reference_px`` (m, 2) went: the deformed pixel of the tracked feature
-    at the same reference pixel (within ``tol_px``); (m, 2) and (m,) bool found."""
-    if len(tracked_ref) == 0:
-        return np.zeros_like(reference_px), np.zeros(len(reference_px), bool)
-    dist, k = cKDTree(tracked_ref).query(reference_px, distance_upper_bound=tol_px)
-    found = np.isfinite(dist)
-    return tracked_def[np.where(found, k, 0)], found
+def _tracked(reference: Features, values: np.ndarray, settings: StartSettings
+             ) -> tuple[np.ndarray, int, int]:
+    """One camera's reference features in its deformed image: (k, 2) the deformed pixel of
+    each reference feature (NaN: not matched, or not a RANSAC inlier of a homography), the
+    matches and the inliers."""
+    deformed = detect_features(values, None, settings.max_features, settings.spread_cells)
+    i, j = match_descriptors(reference, deformed)
+    where = np.full((len(reference), 2), np.nan)
+    if len(i) < 4:
+        return where, len(i), 0
+    _, inlier = cv2.findHomography(reference.px[i], deformed.px[j], cv2.RANSAC,
+                                   settings.ransac_px, maxIters=5000, confidence=0.999)
+    keep = np.zeros(len(i), bool) if inlier is None else inlier.ravel().astype(bool)
+    where[i[keep]] = deformed.px[j[keep]]
+    return where, len(i), int(keep.sum())
 
 
 def feature_start(features: FeatureReference, images: Sequence[Image], cameras: Sequence,
                   settings: StartSettings = StartSettings()) -> FeatureStart:
     """The starting field of a deformed pair from the reference features.
+
+    Each reference stereo point is followed into each camera's deformed image (its feature's
+    match there, a RANSAC inlier), the pair checked against the epipolar line (at most
+    ``settings.max_epipolar_px``), triangulated: ``d = Y - X``; then :func:`fit_field`.
 
     Parameters
     ----------
@@ -297,18 +297,15 @@ def feature_start(features: FeatureReference, images: Sequence[Image], cameras: 
     FeatureStart: ``U`` (n, 3) mm on the reference nodes, or None with the report's failure.
     """
     cam0, cam1 = cameras
-    if len(features.values) != 2:
-        raise ValueError("feature_start: a FeatureReference without its reference images")
-    a0, b0, m0 = _tracked(features.values[0], images[0].values, features.mask0, settings)
-    a1, b1, m1 = _tracked(features.values[1], images[1].values, features.mask1, settings)
-    q0, found0 = _follow(features.px0, a0, b0, settings.pair_px)
-    q1, found1 = _follow(features.px1, a1, b1, settings.pair_px)
-    both = np.flatnonzero(found0 & found1)
+    where0, m0, n0 = _tracked(features.features[0], images[0].values, settings)
+    where1, m1, n1 = _tracked(features.features[1], images[1].values, settings)
+    q0, q1 = where0[features.index0], where1[features.index1]
+    both = np.flatnonzero(np.isfinite(q0[:, 0]) & np.isfinite(q1[:, 0]))
     if both.size:
         both = both[epipolar_distance_px(cam0, cam1, q0[both], q1[both])
                     <= settings.max_epipolar_px]
     Y, _ = triangulate(cam0, cam1, q0[both], q1[both])
-    counts = dict(matches=(m0, m1), inliers=(len(a0), len(a1)), points=int(both.size))
+    counts = dict(matches=(m0, m1), inliers=(n0, n1), points=int(both.size))
     if both.size < settings.min_points:
         report = StartReport(**counts, failure=f"{both.size} points tracked in both cameras, "
                                                f"at least {settings.min_points} needed")
