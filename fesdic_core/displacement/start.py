@@ -52,7 +52,8 @@ from fesdic_core.solve.tikhonov import surface_gradient_operator, tikhonov_weigh
 logger = logging.getLogger(__name__)
 
 __all__ = ["StartSettings", "FeatureReference", "StartReport", "FeatureStart", "FieldFit",
-           "feature_reference", "feature_start", "fit_field", "start_residual_percent"]
+           "feature_reference", "feature_start", "fit_field", "start_residual_percent",
+           "image_shift_px"]
 
 
 @dataclass(frozen=True)
@@ -393,3 +394,12 @@ def start_residual_percent(reference: DisplacementReference, images: Sequence[Im
     scaled = [pyramid(im, scale + 1)[scale] for im in images]
     return [float(displacement_residual(U, view, scaled, reference.settings.normalisation,
                                         jacobian=False).std_percent) for U in candidates]
+
+
+def image_shift_px(reference: DisplacementReference, U: np.ndarray, V: np.ndarray,
+                   percentile: float = 90.0) -> float:
+    """How far apart two fields (n, 3) put the surface in camera 0's full-resolution image:
+    the ``percentile`` of the nodes' pixel distances between ``X + U`` and ``X + V``."""
+    X, cam0 = reference.mesh.nodes, reference.cameras[0]
+    d = np.linalg.norm(cam0.project(X + U) - cam0.project(X + V), axis=1)
+    return float(np.percentile(d, percentile)) if d.size else 0.0

@@ -18,7 +18,8 @@ from typing import Sequence
 import numpy as np
 
 from fesdic_core.displacement.driver import measure_displacement
-from fesdic_core.displacement.start import feature_start, start_residual_percent
+from fesdic_core.displacement.start import (feature_start, image_shift_px,
+                                            start_residual_percent)
 from fesdic_core.displacement.strain import surface_green_lagrange
 from fesdic_core.imaging.image import read_image
 
@@ -88,8 +89,9 @@ def frame_start(reference: SeriesReference, index: int, images: Sequence,
 
     ``reference.start``: "zero"; "previous": ``U_previous`` (the last good frame's field in an
     incremental series, else None); "features": the feature start
-    (:func:`~fesdic_core.displacement.start.feature_start`) or, if it has a lower residual at
-    the coarsest scale, ``U_previous`` (zero when None); the fallback when no features match.
+    (:func:`~fesdic_core.displacement.start.feature_start`) where it helps: where it puts the
+    surface more than a pixel of the coarsest scale away from ``U_previous`` (zero when None)
+    and has the lower residual at that scale; else, and when no features match, the fallback.
     """
     if reference.start == "zero":
         return None, "zero"
@@ -102,12 +104,20 @@ def frame_start(reference: SeriesReference, index: int, images: Sequence,
                        fallback)
         return U_previous, fallback
     other = np.zeros_like(found.U) if U_previous is None else U_previous
+    coarsest = reference.displacement.settings.scales[0]
+    shift = image_shift_px(reference.displacement, found.U, other)
+    if shift < 2.0 ** coarsest:
+        # within a pixel of the coarsest scale, the Gauss-Newton's own reach: the fallback
+        # (zero, or a correlated field) has no matching noise
+        logger.info("frame %d start: features: %s; within %.2g px of %s (90 %% of the nodes): "
+                    "starting from %s", index, found.report.describe(), shift, fallback, fallback)
+        return U_previous, fallback
     r_features, r_other = start_residual_percent(reference.displacement, images,
                                                  [found.U, other])
     chosen = "features" if not r_other < r_features else fallback
-    logger.info("frame %d start: features: %s; residual at scale %d %.3f%% (%s %.3f%%): "
-                "starting from %s", index, found.report.describe(),
-                reference.displacement.settings.scales[0], r_features, fallback, r_other, chosen)
+    logger.info("frame %d start: features: %s; %.2g px from %s, residual at scale %d %.3f%% "
+                "(%s %.3f%%): starting from %s", index, found.report.describe(), shift, fallback,
+                coarsest, r_features, fallback, r_other, chosen)
     return (found.U, chosen) if chosen == "features" else (U_previous, chosen)
 
 
