@@ -47,13 +47,14 @@ from fesdic_core.displacement.driver import DisplacementReference
 from fesdic_core.displacement.residual import displacement_residual
 from fesdic_core.fe.mesh import element_areas
 from fesdic_core.imaging.image import Image, pyramid
+from fesdic_core.imaging.noise import residual_noise_floor
 from fesdic_core.solve.tikhonov import surface_gradient_operator, tikhonov_weight
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["StartSettings", "FeatureReference", "StartReport", "FeatureStart", "FieldFit",
            "feature_reference", "feature_start", "fit_field", "start_residual_percent",
-           "image_shift_px"]
+           "coarse_noise_percent", "image_shift_px"]
 
 
 @dataclass(frozen=True)
@@ -61,8 +62,8 @@ class StartSettings:
     """How the feature start is made.
 
     max_features, spread_cells : SIFT features per image, the strongest of each of
-        ``spread_cells x spread_cells`` tiles (:func:`match_features`: a specimen lit
-        unevenly still gets features everywhere).
+        ``spread_cells x spread_cells`` tiles (:func:`~fesdic_core.cameras.triangulation.
+        detect_features`: a specimen lit unevenly still gets features everywhere).
     ransac_px : RANSAC threshold (px) of the homography of each camera (reference to
         deformed); a deforming specimen is not a homography, so this is generous: it drops
         gross mismatches only, the robust fit the rest.
@@ -100,9 +101,10 @@ class StartSettings:
         if self.length_mm is not None and not (np.isfinite(self.length_mm) and self.length_mm > 0):
             raise ValueError(f"StartSettings.length_mm must be positive or None, got "
                              f"{self.length_mm!r}")
-        if self.min_points < 4 or self.max_refits < 1 or self.max_features < 10:
-            raise ValueError("StartSettings: min_points >= 4, max_refits >= 1 and "
-                             "max_features >= 10 are needed")
+        if (self.min_points < 4 or self.max_refits < 1 or self.max_features < 10
+                or self.spread_cells < 0):
+            raise ValueError("StartSettings: min_points >= 4, max_refits >= 1, "
+                             "max_features >= 10 and spread_cells >= 0 are needed")
 
 
 @dataclass(frozen=True, eq=False)
@@ -385,15 +387,31 @@ def fit_field(basis: sps.csr_matrix, X_mm: np.ndarray, d_mm: np.ndarray,
     return FieldFit(U=U, kept=kept, misfit_mm=misfit, refits=refits)
 
 
+def _coarsest(reference: DisplacementReference, images: Sequence[Image]):
+    scale = reference.settings.scales[0]
+    return reference.view(scale), [pyramid(im, scale + 1)[scale] for im in images]
+
+
 def start_residual_percent(reference: DisplacementReference, images: Sequence[Image],
                            candidates: Sequence[np.ndarray]) -> list[float]:
     """The residual (percent) of each candidate start ``U`` (n, 3) at the coarsest scale of
     ``reference`` for the deformed full-resolution ``images`` (the better start is lower)."""
-    scale = reference.settings.scales[0]
-    view = reference.view(scale)
-    scaled = [pyramid(im, scale + 1)[scale] for im in images]
+    view, scaled = _coarsest(reference, images)
     return [float(displacement_residual(U, view, scaled, reference.settings.normalisation,
                                         jacobian=False).std_percent) for U in candidates]
+
+
+def coarse_noise_percent(reference: DisplacementReference, images: Sequence[Image]) -> float:
+    """The residual (percent) that the images' noise explains at the coarsest scale
+    (:func:`~fesdic_core.imaging.noise.residual_noise_floor` of each camera's reference and
+    deformed images at the reference points it sees, pooled over the cameras): a start whose
+    residual is below it already matches the images at that scale."""
+    view, scaled = _coarsest(reference, images)
+    counts = view.seen.sum(axis=1)
+    floors = [residual_noise_floor(view.X, view.seen[c], [view.images[c], scaled[c]],
+                                   [view.cameras[c], view.cameras[c]]).percent for c in range(2)]
+    total = int(counts.sum())
+    return float(np.sqrt(np.dot(counts, np.square(floors)) / total)) if total else float("nan")
 
 
 def image_shift_px(reference: DisplacementReference, U: np.ndarray, V: np.ndarray,

@@ -18,8 +18,8 @@ from typing import Sequence
 import numpy as np
 
 from fesdic_core.displacement.driver import measure_displacement
-from fesdic_core.displacement.start import (feature_start, image_shift_px,
-                                            start_residual_percent)
+from fesdic_core.displacement.start import (coarse_noise_percent, feature_start,
+                                            image_shift_px, start_residual_percent)
 from fesdic_core.displacement.strain import surface_green_lagrange
 from fesdic_core.imaging.image import read_image
 
@@ -89,35 +89,44 @@ def frame_start(reference: SeriesReference, index: int, images: Sequence,
 
     ``reference.start``: "zero"; "previous": ``U_previous`` (the last good frame's field in an
     incremental series, else None); "features": the feature start
-    (:func:`~fesdic_core.displacement.start.feature_start`) where it helps: where it puts the
-    surface more than a pixel of the coarsest scale away from ``U_previous`` (zero when None)
-    and has the lower residual at that scale; else, and when no features match, the fallback.
+    (:func:`~fesdic_core.displacement.start.feature_start`) where it helps. The fallback is
+    ``U_previous`` (zero when None); it is kept when its residual at the coarsest scale is
+    within the images' noise there (no features computed), when no features match, when the
+    features' field is within a pixel of the coarsest scale of it, or when the features' has
+    the higher residual at that scale.
     """
     if reference.start == "zero":
         return None, "zero"
     fallback = "previous" if U_previous is not None else "zero"
     if reference.start == "previous" or reference.features is None:
         return U_previous, fallback
-    found = feature_start(reference.features, images, reference.displacement.cameras)
+    displacement, coarsest = reference.displacement, reference.displacement.settings.scales[0]
+    other = np.zeros((displacement.mesh.n_nodes, 3)) if U_previous is None else U_previous
+    r_other = start_residual_percent(displacement, images, [other])[0]
+    noise = coarse_noise_percent(displacement, images)
+    if r_other <= noise:
+        logger.info("frame %d start: %s matches the images at scale %d within their noise "
+                    "(residual %.3f%%, noise floor %.3f%%): no features needed", index, fallback,
+                    coarsest, r_other, noise)
+        return U_previous, fallback
+    found = feature_start(reference.features, images, displacement.cameras)
     if found.U is None:
         logger.warning("frame %d start: %s; starting from %s", index, found.report.describe(),
                        fallback)
         return U_previous, fallback
-    other = np.zeros_like(found.U) if U_previous is None else U_previous
-    coarsest = reference.displacement.settings.scales[0]
-    shift = image_shift_px(reference.displacement, found.U, other)
+    shift = image_shift_px(displacement, found.U, other)
     if shift < 2.0 ** coarsest:
         # within a pixel of the coarsest scale, the Gauss-Newton's own reach: the fallback
         # (zero, or a correlated field) has no matching noise
         logger.info("frame %d start: features: %s; within %.2g px of %s (90 %% of the nodes): "
                     "starting from %s", index, found.report.describe(), shift, fallback, fallback)
         return U_previous, fallback
-    r_features, r_other = start_residual_percent(reference.displacement, images,
-                                                 [found.U, other])
+    r_features = start_residual_percent(displacement, images, [found.U])[0]
     chosen = "features" if not r_other < r_features else fallback
     logger.info("frame %d start: features: %s; %.2g px from %s, residual at scale %d %.3f%% "
-                "(%s %.3f%%): starting from %s", index, found.report.describe(), shift, fallback,
-                coarsest, r_features, fallback, r_other, chosen)
+                "(%s %.3f%%, noise floor %.3f%%): starting from %s", index,
+                found.report.describe(), shift, fallback, coarsest, r_features, fallback,
+                r_other, noise, chosen)
     return (found.U, chosen) if chosen == "features" else (U_previous, chosen)
 
 
