@@ -10,9 +10,11 @@ from fesdic_core.displacement.residual import (ReferenceView, DisplacementResidu
                                                displacement_operators, displacement_rhs,
                                                component_dofs)
 from fesdic_core.displacement.solvers import componentwise, ComponentTikhonovSolver
+from fesdic_core.displacement.smooth_fit import FieldFit, fit_field
 from fesdic_core.displacement.start import (StartSettings, FeatureReference, StartReport,
-                                            FeatureStart, FieldFit, feature_reference,
-                                            feature_start, fit_field, start_residual_percent)
+                                            FeatureStart, feature_reference, feature_start,
+                                            start_residual_percent, coarse_noise_percent,
+                                            image_shift_px)
 from fesdic_core.displacement.strain import tangent_frame, surface_green_lagrange, RECOVERIES
 
 __all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference",
@@ -22,4 +24,4 @@ __all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "Displ
            "displacement_operators", "displacement_rhs", "component_dofs", "componentwise",
            "ComponentTikhonovSolver", "StartSettings", "FeatureReference", "StartReport",
            "FeatureStart", "FieldFit", "feature_reference", "feature_start", "fit_field",
-           "start_residual_percent", "tangent_frame", "surface_green_lagrange", "RECOVERIES"]
+           "start_residual_percent", "coarse_noise_percent", "image_shift_px", "tangent_frame", "surface_green_lagrange", "RECOVERIES"]

@@ -13,8 +13,9 @@ import pytest
 
 from fesdic_core.displacement.driver import (MIN_POINTS_PER_ELEMENT, DisplacementSettings,
                                              displacement_reference, measure_displacement)
+from fesdic_core.displacement.smooth_fit import fit_field
 from fesdic_core.displacement.start import (StartSettings, feature_reference, feature_start,
-                                            fit_field, start_residual_percent)
+                                            start_residual_percent)
 from fesdic_core.fe.mesh import rectangle_mesh
 from fesdic_core.fe.quadrature import pixel_quadrature
 from fesdic_core.imaging.image import Image
