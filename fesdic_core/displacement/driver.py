@@ -54,11 +54,16 @@ from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StartSc
 
 logger = logging.getLogger(__name__)
 
+#: a coarse scale whose elements hold fewer integration points than this (median) is left
+#: out: the per-element normalisation of one point makes its residual identically zero (the
+#: scale "converges" in 0 iterations at 0 %), and an element of a few pixels holds no texture
+MIN_POINTS_PER_ELEMENT = 16
+
 #: the Jacobian of the displacement's Gauss-Newton: the reference images' (modified
 #: Gauss-Newton, H once per scale) or the deformed images' at the current state (full)
 JACOBIANS = ("reference", "current")
 
-__all__ = ["JACOBIANS", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
+__all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
            "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
            "measure_displacement", "displacement_verdict"]
 
@@ -122,7 +127,11 @@ def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: 
                            ) -> DisplacementReference:
     """The reference of a series: ``mesh`` is the reference surface (measured nodes, mm),
     ``images`` and ``cameras`` the reference stereo pair and its calibrated cameras
-    (full resolution). Raises :class:`MeasurementInputError` for inputs that do not fit."""
+    (full resolution). Raises :class:`MeasurementInputError` for inputs that do not fit.
+
+    A coarse scale whose elements hold fewer than :data:`MIN_POINTS_PER_ELEMENT` points
+    (median) is left out with a warning (the reference's ``settings.scales`` are those kept).
+    """
     check_inputs(mesh, images, cameras)
     check_scales(images, settings.scales)
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
@@ -130,9 +139,19 @@ def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: 
     for scale in settings.scales:
         scaled = [c.scaled(scale) for c in cameras]
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px)
+        per_element = float(np.median(np.bincount(quad.element, minlength=quad.n_elements)))
+        if per_element < MIN_POINTS_PER_ELEMENT and scale != settings.scales[-1]:
+            logger.warning("displacement scale %d left out: its elements hold %.0f pixels "
+                           "(median), fewer than %d (elements of %.2g px at this scale; coarsest "
+                           "useful scale: fewer [displacement] scales)", scale, per_element,
+                           MIN_POINTS_PER_ELEMENT, np.sqrt(per_element))
+            continue
         normalisation = settings.normalisation if settings.jacobian == "reference" else None
         views.append(reference_view(quad, mesh.nodes, [p[scale] for p in pyramids], scaled, scale,
                                     normalisation=normalisation))
+    kept = tuple(v.scale for v in views)
+    if kept != tuple(settings.scales):
+        settings = dataclasses.replace(settings, scales=kept)
     return DisplacementReference(mesh=mesh, cameras=tuple(cameras), images=tuple(images),
                                  views=tuple(views), settings=settings)
 
@@ -264,7 +283,7 @@ def displacement_verdict(residual_percent: float, noise_percent: float, U: np.nd
                          nodes: np.ndarray, texture_ratios: Sequence[float], sources: Sequence[str],
                          finest: ScaleReport, settings: DisplacementSettings) -> str | None:
     """Why a displacement cannot be trusted, or None: no texture in a deformed image, a
-    diverged field, then :func:`driver.judge` (residual against the noise floor, stagnation)."""
+    diverged field (``U``: the Gauss-Newton's change from its start), then :func:`driver.judge` (residual against the noise floor, stagnation)."""
     for ratio, source in zip(texture_ratios, sources):
         if not ratio >= MIN_TEXTURE_RATIO:
             return (f"{source}: no texture to correlate over the specimen (contrast over noise "
@@ -341,7 +360,9 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
             progress(k, len(settings.scales), report)
     if gn is None:                      # (DisplacementSettings refuses an empty schedule)
         raise ValueError("measure_displacement: no image scale to measure at")
-    failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U,
+    # the divergence is the Gauss-Newton's own excursion: a large motion's start is none
+    start = 0.0 if U0 is None else np.asarray(U0, float).reshape(n, 3)
+    failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U - start,
                                    reference.mesh.nodes, ratios, [im.source for im in images],
                                    reports[-1], settings)
     if failure is not None:
