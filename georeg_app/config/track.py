@@ -35,6 +35,11 @@ A complete example (optional keys show their default in parentheses)::
                                   # images built and factorized once per scale for every
                                   # iteration and frame; "current": full Gauss-Newton, H
                                   # rebuilt at each iteration      (default "reference")
+    prefilter_px = 1.0            # image model of the frames and of the reference pair for
+                                  # the displacement: Gaussian prefilter sigma (px); the
+                                  # reference shape keeps [method] prefilter_px. 1 px reads
+                                  # sub-pixel motions within 1 % where 0.5 px reads them 1.4-3 %
+                                  # low (benchmarks/bench_subpixel.py)        (default 1.0)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
@@ -54,7 +59,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fesdic_core.displacement.driver import JACOBIANS
+from fesdic_core.displacement.driver import DISPLACEMENT_PREFILTER_PX, JACOBIANS
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
                                        OutputConfig, cameras_table, geometry_table, images_table, method_table)
@@ -92,6 +97,7 @@ class DisplacementConfig:
     levels: int = 2
     jacobian: str = "reference"
     start: str = "features"
+    prefilter_px: float = DISPLACEMENT_PREFILTER_PX
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:
@@ -178,7 +184,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
                                   default=d.tikhonov_length_mm),
         levels=t.take("levels", integer, "an integer", default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
-        start=t.take("start", string, "a string", default=d.start))
+        start=t.take("start", string, "a string", default=d.start),
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px))
     t.finish()
     check(t, "method", c.method, c.method in DISPLACEMENT_METHODS,
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
@@ -187,6 +194,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "levels", c.levels, c.levels >= 1, ">= 1")
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))
+    check(t, "prefilter_px", c.prefilter_px, c.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "start", c.start, c.start in START_MODES,
           "one of " + ", ".join(map(json.dumps, START_MODES)))
     return c

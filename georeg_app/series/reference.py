@@ -63,8 +63,10 @@ class SeriesReference:
     features: FeatureReference | None = None
 
 
-def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
-    prefilter, order = config.method.prefilter_px, config.method.interpolation_order
+def _reference_images(config: TrackConfig, prefilter_px: float | None = None) -> tuple[Image, Image]:
+    """The reference pair with the shape's image model, or with ``prefilter_px``."""
+    prefilter = config.method.prefilter_px if prefilter_px is None else prefilter_px
+    order = config.method.interpolation_order
     return tuple(read_image(p, prefilter_px=prefilter, order=order) for p in (config.images.cam0,
                                                                                config.images.cam1))
 
@@ -147,13 +149,15 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     settings = DisplacementSettings(scales=d.scale_sequence,
                                     normalisation=config.method.normalisation,
                                     jacobian=d.jacobian)
+    if d.prefilter_px != config.method.prefilter_px:     # the frames' image model
+        images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)
     solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
     features = feature_reference(reference) if d.start == "features" else None
     return SeriesReference(displacement=reference, solver=solver,
-                           prefilter_px=config.method.prefilter_px, label=label,
+                           prefilter_px=d.prefilter_px, label=label,
                            interpolation_order=config.method.interpolation_order,
                            element_face=None if model is None else model.element_face,
                            start=d.start, features=features)
