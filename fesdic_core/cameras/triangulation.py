@@ -21,7 +21,8 @@ from fesdic_core.cameras.rig import stereo_transform
 logger = logging.getLogger(__name__)
 
 __all__ = ["StereoPoints", "normalised_points", "epipolar_distance_px", "triangulate",
-           "match_features", "stereo_points", "DEFAULT_MAX_EPIPOLAR_PX", "RATIO_TEST"]
+           "depth_per_px", "match_features", "stereo_points", "DEFAULT_MAX_EPIPOLAR_PX",
+           "RATIO_TEST"]
 
 #: matches farther than this from their epipolar line (px, in camera 1) are outliers
 DEFAULT_MAX_EPIPOLAR_PX = 1.0
@@ -155,7 +156,8 @@ def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray |
 
 def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.ndarray,
                   mask0: np.ndarray | None = None,
-                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX) -> StereoPoints:
+                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX,
+                  max_features: int = 5000) -> StereoPoints:
     """Matches inside ``mask0`` that agree with the calibrated epipolar geometry, triangulated.
 
     Parameters
@@ -164,12 +166,13 @@ def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.n
     values0, values1 : (h, w) gray levels of camera 0's and camera 1's images.
     mask0 : (h, w) bool, the region of camera 0's image to match (None: all).
     max_epipolar_px : matches farther from their epipolar line (px) are dropped.
+    max_features : at most this many features per image (:func:`match_features`).
 
     Returns
     -------
     StereoPoints (possibly empty: the caller judges whether there are enough).
     """
-    px0, px1, n_features = match_features(values0, values1, mask0)
+    px0, px1, n_features = match_features(values0, values1, mask0, max_features)
     n = len(px0)
     if n == 0:
         logger.info("stereo matches: %d features in camera 0, no match", n_features)
@@ -184,3 +187,21 @@ def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.n
                 n_features, n, int(keep.sum()), max_epipolar_px,
                 float(np.median(d[keep])) if keep.any() else float("nan"), len(idx))
     return StereoPoints(px0[idx], px1[idx], xyz[front], d[idx], err[front], n)
+
+
+def depth_per_px(cam0: Camera, cam1: Camera, px0: np.ndarray, px1: np.ndarray) -> np.ndarray:
+    """How far (n,) mm each triangulated match ``px0``, ``px1`` (n, 2) moves when its
+    camera-1 pixel moves by 1 px along its epipolar line (the triangulation's sensitivity
+    to a matching error: a match's error of ``e`` px moves the point about ``e`` times this).
+
+    The epipolar direction at ``px1`` is the image in camera 1 of camera 0's ray through
+    ``px0`` (two points on the ray, 1 mm apart, projected)."""
+    if len(px0) == 0:
+        return np.zeros(0)
+    xyz, _ = triangulate(cam0, cam1, px0, px1)
+    ray = xyz - cam0.center
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    direction = cam1.project(xyz + ray) - cam1.project(xyz)
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    moved, _ = triangulate(cam0, cam1, px0, np.asarray(px1, dtype=np.float64) + direction)
+    return np.linalg.norm(moved - xyz, axis=1)

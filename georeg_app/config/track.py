@@ -50,7 +50,8 @@ from typing import Any
 from fesdic_core.displacement.driver import JACOBIANS
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
-                                       OutputConfig, cameras_table, geometry_table, images_table, method_table)
+                                       OutputConfig, cameras_table, geometry_table, images_table,
+                                       method_table, placed)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                                            load_toml, number, resolve_path, show, show_path, string)
 
@@ -234,8 +235,7 @@ def load_track_config(path: str | os.PathLike) -> TrackConfig:
             if value is None:
                 raise top.error(key, "missing required section (or give [reference] dir = a "
                                      "`georeg measure` output folder)")
-        roi = isinstance(geometry, dict) and geometry.get("kind") == "roi"
-        cams = cameras_table(cameras, landmarks, source, base, roi=roi)
+        cams = cameras_table(cameras, landmarks, source, base, **placed(geometry))
         geom, ref = geometry_table(geometry, source, base), None
     else:
         for key, value in (("cameras", cameras), ("geometry", geometry), ("landmarks", landmarks)):
