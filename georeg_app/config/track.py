@@ -31,7 +31,8 @@ A complete example (optional keys show their default in parentheses)::
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
-                                  # and <method>_spline.json for method = "georeg")
+                                  # and <method>_spline.json for method = "georeg"; a CAD
+                                  # part's: nominal_spline.json, the VTU's face parameters)
 
     [output]
     dir = "track_out"             # (default "track_out"; `--out` overrides)
@@ -57,11 +58,13 @@ from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boole
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
            "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY",
-           "series_table", "displacement_table", "reference_table"]
+           "REFERENCE_NOMINAL", "series_table", "displacement_table", "reference_table"]
 
 DISPLACEMENT_METHODS = ("fe", "tikhonov", "georeg")
 DEFAULT_TRACK_DIR = "track_out"
 REFERENCE_SUMMARY = "summary.json"
+#: a CAD part's nominal faces in a `georeg measure` folder (georeg_app.shape.outputs.NOMINAL_FILE)
+REFERENCE_NOMINAL = "nominal_spline.json"
 
 
 @dataclass(frozen=True)
@@ -91,13 +94,15 @@ class DisplacementConfig:
 
 @dataclass(frozen=True)
 class ReferenceConfig:
-    """A `georeg measure` output folder and the files of its (first trusted) method."""
+    """A `georeg measure` output folder and the files of its (first trusted) method;
+    ``nominal``: a CAD part's nominal faces (:data:`REFERENCE_NOMINAL`), None for one patch."""
 
     dir: Path
     mesh: Path
     cameras: Path
     spline: Path | None
     label: str
+    nominal: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -209,8 +214,10 @@ def reference_table(data: Any, source: Path, base: Path, method: str) -> Referen
                   "with [method] name = \"georeg\")" if what == "spline" else ""
             raise t.error("dir", f"{show_path(folder)} lacks {path.name}{why}",
                           ConfigFileNotFoundError)
+    nominal = folder / REFERENCE_NOMINAL
     return ReferenceConfig(dir=folder, mesh=files["mesh"], cameras=files["cameras"],
-                           spline=files.get("spline"), label=str(entry.get("label", stem)))
+                           spline=files.get("spline"), label=str(entry.get("label", stem)),
+                           nominal=nominal if nominal.is_file() else None)
 
 
 def load_track_config(path: str | os.PathLike) -> TrackConfig:
