@@ -1,17 +1,19 @@
-"""``[geometry] kind = "cad"`` with a ``pose``: the rig's triangulation places the part, no landmarks.
+"""``[geometry] kind = "cad"`` with a ``pose``: the rig's triangulation places the part.
 
 1. **Points.** SIFT stereo matches of the reference pair (:data:`MAX_FEATURES` features: a
    part's raised features need points of their own to set the pose) that agree with the
-   calibrated epipolar geometry, triangulated (:func:`fesdic_core.cameras.triangulation.stereo_points`):
+   calibrated epipolar geometry, triangulated
+   (:func:`fesdic_core.cameras.triangulation.stereo_points`):
    with a rough pose, inside camera 0's silhouette of the selected faces at that pose,
    dilated by :data:`DILATE` of the image's diagonal; with ``pose = "auto"``, over the whole
    image (the part should fill most of camera 0's view; else give a rough pose).
 2. **A start.** The rough pose, or (``"auto"``) the principal axes of the points matched to
-   the faces' (:func:`fesdic_core.cameras.icp.principal_axes_starts`: each choice of signs,
+   the faces' (:func:`fesdic_core.cameras.icp_start.principal_axes_starts`: each choice of signs,
    and turns about an axis when two moments nearly agree), each slid over a grid along
-   the faces' plane (:func:`~fesdic_core.cameras.icp.best_start`), the best after a short ICP.
+   the faces' plane (:func:`~fesdic_core.cameras.icp_start.best_start`), the best after a short ICP.
 3. **ICP.** Point-to-plane ICP of the points onto the triangulated faces
-   (:func:`georeg_app.inputs.cad.cad_triangles`, :func:`fesdic_core.cameras.icp.point_to_plane_icp`),
+   (:func:`georeg_app.inputs.cad.cad_triangles`,
+   :func:`fesdic_core.cameras.icp.point_to_plane_icp`),
    then again on the points inside camera 0's silhouette of the faces at that pose (eroded
    by :data:`SILHOUETTE_MARGIN_PX`) only.
 4. **Checks** (errors name the numbers): at least :data:`MIN_POINTS` points inside the
@@ -34,8 +36,9 @@ import cv2
 import numpy as np
 
 from fesdic_core.cameras.camera import Camera
-from fesdic_core.cameras.icp import (IcpResult, TriangleSurface, best_start, point_to_plane_icp,
-                                     principal_axes_starts, rotation_matrix, rotation_vector)
+from fesdic_core.cameras.icp import (IcpResult, TriangleSurface, point_to_plane_icp,
+                                     rotation_matrix, rotation_vector)
+from fesdic_core.cameras.icp_start import best_start, principal_axes_starts
 from fesdic_core.cameras.triangulation import StereoPoints, depth_per_px, stereo_points
 from fesdic_core.imaging.image import Image
 
@@ -234,8 +237,8 @@ def place_part(geometry: GeometryConfig, cameras: Sequence[Camera], images: Sequ
     _check(fit, points, noise)
     posed = _posed(cameras, fit.rotation, fit.translation)
     result = CadPose(cameras=posed, rotation=fit.rotation.T,
-                     translation=-fit.rotation.T @ fit.translation, start="auto" if auto else "given",
-                     points=points, fit=fit, noise_mm=noise)
+                     translation=-fit.rotation.T @ fit.translation,
+                     start="auto" if auto else "given", points=points, fit=fit, noise_mm=noise)
     rotation, translation = result.pose_in_camera0()
     logger.info("CAD pose: pose = {rotation_deg = %s, translation_mm = %s} (the part in camera "
                 "0's frame)", np.round(rotation, 3).tolist(), np.round(translation, 3).tolist())

@@ -3,9 +3,9 @@ surface's moments, a known rigid motion recovered, the principal-axes start of a
 import numpy as np
 import pytest
 
-from fesdic_core.cameras.icp import (TriangleSurface, best_start, closest_points_on_triangles,
-                                     point_to_plane_icp, principal_axes_starts, rotation_matrix,
-                                     rotation_vector)
+from fesdic_core.cameras.icp import (TriangleSurface, closest_points_on_triangles,
+                                     point_to_plane_icp, rotation_matrix, rotation_vector)
+from fesdic_core.cameras.icp_start import best_start, principal_axes_starts
 
 #: the known motion of the points off the part: a few degrees and mm
 ROTATION_DEG = np.array([2.0, -3.0, 4.0])
