@@ -173,3 +173,14 @@ def test_points_off_the_faces_are_refused_with_the_numbers(folded):
     images = _images(config)
     with pytest.raises(InputError, match=r"\[geometry\] pose: .* (points|um RMS)"):
         place_part(geometry, load_cameras(config.cameras, images), images)
+
+
+def test_the_report_s_configuration_holds_the_rough_pose_as_a_table(folded):
+    import tomllib
+
+    from georeg_app.report.provenance import config_toml
+    folder, _ = folded
+    line = "pose = {rotation_deg = [180.0, 0.0, 10.0], translation_mm = [1.0, 2.0, 400.0]}"
+    shown = tomllib.loads(config_toml(load_config(_config(folder, line))))
+    assert shown["geometry"]["pose"] == {"rotation_deg": [180.0, 0.0, 10.0],
+                                         "translation_mm": [1.0, 2.0, 400.0]}
