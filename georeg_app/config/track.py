@@ -43,7 +43,8 @@ A complete example (optional keys show their default in parentheses)::
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
-                                  # and <method>_spline.json for method = "georeg")
+                                  # and <method>_spline.json for method = "georeg"; a CAD
+                                  # part's: nominal_spline.json, the VTU's face parameters)
 
     [output]
     dir = "track_out"             # (default "track_out"; `--out` overrides)
@@ -62,19 +63,23 @@ from typing import Any
 from fesdic_core.displacement.driver import DISPLACEMENT_PREFILTER_PX, JACOBIANS
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
-                                       OutputConfig, cameras_table, geometry_table, images_table, method_table)
+                                       OutputConfig, cameras_table, geometry_table, images_table,
+                                       method_table, placed)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                                            load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
-           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "START_MODES", "REFERENCE_SUMMARY",
-           "series_table", "displacement_table", "reference_table"]
+           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "START_MODES",
+           "REFERENCE_SUMMARY", "REFERENCE_NOMINAL", "series_table", "displacement_table",
+           "reference_table"]
 
 DISPLACEMENT_METHODS = ("fe", "tikhonov", "georeg")
 #: the starting field of each frame (``[displacement] start``)
 START_MODES = ("features", "previous", "zero")
 DEFAULT_TRACK_DIR = "track_out"
 REFERENCE_SUMMARY = "summary.json"
+#: a CAD part's nominal faces in a `georeg measure` folder (georeg_app.shape.outputs.NOMINAL_FILE)
+REFERENCE_NOMINAL = "nominal_spline.json"
 
 
 @dataclass(frozen=True)
@@ -106,13 +111,15 @@ class DisplacementConfig:
 
 @dataclass(frozen=True)
 class ReferenceConfig:
-    """A `georeg measure` output folder and the files of its (first trusted) method."""
+    """A `georeg measure` output folder and the files of its (first trusted) method;
+    ``nominal``: a CAD part's nominal faces (:data:`REFERENCE_NOMINAL`), None for one patch."""
 
     dir: Path
     mesh: Path
     cameras: Path
     spline: Path | None
     label: str
+    nominal: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -229,8 +236,10 @@ def reference_table(data: Any, source: Path, base: Path, method: str) -> Referen
                   "with [method] name = \"georeg\")" if what == "spline" else ""
             raise t.error("dir", f"{show_path(folder)} lacks {path.name}{why}",
                           ConfigFileNotFoundError)
+    nominal = folder / REFERENCE_NOMINAL
     return ReferenceConfig(dir=folder, mesh=files["mesh"], cameras=files["cameras"],
-                           spline=files.get("spline"), label=str(entry.get("label", stem)))
+                           spline=files.get("spline"), label=str(entry.get("label", stem)),
+                           nominal=nominal if nominal.is_file() else None)
 
 
 def load_track_config(path: str | os.PathLike) -> TrackConfig:
@@ -255,8 +264,7 @@ def load_track_config(path: str | os.PathLike) -> TrackConfig:
             if value is None:
                 raise top.error(key, "missing required section (or give [reference] dir = a "
                                      "`georeg measure` output folder)")
-        roi = isinstance(geometry, dict) and geometry.get("kind") == "roi"
-        cams = cameras_table(cameras, landmarks, source, base, roi=roi)
+        cams = cameras_table(cameras, landmarks, source, base, **placed(geometry))
         geom, ref = geometry_table(geometry, source, base), None
     else:
         for key, value in (("cameras", cameras), ("geometry", geometry), ("landmarks", landmarks)):
