@@ -129,6 +129,7 @@ file = "{cameras}"
 kind = "roi"
 surface = "quadric"
 polygon_px = {polygon}
+elements = 150
 """
 
 
