@@ -52,3 +52,9 @@ def family_scenes():
             cache[divisor] = scenes.family_scene(divisor)
         return cache[divisor]
     return get
+
+
+@pytest.fixture(scope="session")
+def twist_wave_pair():
+    """The displacement tests' flat plate, then the same paint twisted and wavy (scenes.py)."""
+    return scenes.twist_wave_pair()
