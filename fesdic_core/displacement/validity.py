@@ -92,7 +92,7 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
     std = _predicted_std(blocks, sigma_r, mean_weight)
     neighbours = node_neighbours([g.connectivity for g in quad.groups], quad.n_nodes)
     return node_validity(residual_to_noise, texture, conditioning,
-                         neighbour_ratio(neighbours, nodes, U, std))
+                         neighbour_ratio(neighbours, nodes, U, std), seen=total > 0)
 
 
 def _predicted_std(blocks: np.ndarray, sigma_r: np.ndarray, mean_weight: np.ndarray

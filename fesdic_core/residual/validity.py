@@ -94,9 +94,9 @@ DEFAULT_MAX_INVALID_SHARE = 0.03
 class NodeValidity:
     """The local checks of every node (see the module docstring), all (n,).
 
-    ``valid``: bool, every check passed (a node no point sees is invalid);
-    ``residual_limit``: the largest ``residual_to_noise`` of a valid node in this field
-    (:func:`residual_limit`).
+    ``valid``: bool, every check passed (a node no point sees is invalid); ``seen``: bool,
+    some point of the node's support entered the residual; ``residual_limit``: the largest
+    ``residual_to_noise`` of a valid node in this field (:func:`residual_limit`).
     """
 
     residual_to_noise: np.ndarray
@@ -104,12 +104,17 @@ class NodeValidity:
     conditioning: np.ndarray
     neighbour_ratio: np.ndarray
     valid: np.ndarray
+    seen: np.ndarray
     residual_limit: float = MAX_RESIDUAL_TO_NOISE
 
     @property
     def invalid_share(self) -> float:
-        """Share of the nodes that are not valid (0 for no node)."""
-        return float(np.mean(~self.valid)) if self.valid.size else 0.0
+        """Share of the nodes the images see that are not valid (0 if none is seen). A node
+        that no point sees (hidden, masked, outside the images) is invalid but not counted
+        here: its value is not measured, only held by its neighbours or a regularization
+        (the measurement's coverage says where, and plain FE cannot solve for it)."""
+        n = int(np.count_nonzero(self.seen))
+        return float(np.count_nonzero(~self.valid & self.seen)) / n if n else 0.0
 
     def failure(self, nodes: np.ndarray, max_invalid_share: float) -> str | None:
         """One line naming the invalid nodes when their share exceeds ``max_invalid_share``
@@ -118,11 +123,11 @@ class NodeValidity:
         share = self.invalid_share
         if not share > max_invalid_share:
             return None
-        bad = np.flatnonzero(~self.valid)
+        bad = np.flatnonzero(~self.valid & self.seen)
         ratio = np.where(np.isfinite(self.residual_to_noise), self.residual_to_noise, np.inf)
         worst = int(bad[np.argmax(ratio[bad])])
         x = ", ".join(f"{v:.4g}" for v in np.asarray(nodes, float)[worst])
-        return (f"{bad.size} of {self.valid.size} nodes ({100 * share:.1f} %, at most "
+        return (f"{bad.size} of {np.count_nonzero(self.seen)} nodes ({100 * share:.1f} %, at most "
                 f"{100 * max_invalid_share:g} %) are not valid locally: the worst, node {worst} "
                 f"at ({x}) mm, has a residual {self.residual_to_noise[worst]:.3g} times its local "
                 f"noise (at most {self.residual_limit:.3g}), texture ratio "
@@ -281,10 +286,12 @@ def residual_limit(residual_to_noise: np.ndarray) -> float:
 
 
 def node_validity(residual_to_noise: np.ndarray, texture_ratio: np.ndarray,
-                  conditioning: np.ndarray, neighbour: np.ndarray) -> NodeValidity:
+                  conditioning: np.ndarray, neighbour: np.ndarray,
+                  seen: np.ndarray | None = None) -> NodeValidity:
     """The checks of every node (all (n,)) against the thresholds of this module: the
     residual within :func:`residual_limit`, the texture, the conditioning and the neighbours'
-    consistency above or below their constants."""
+    consistency above or below their constants. ``seen``: bool (n,), some point of the
+    node's support entered the residual (default: where ``residual_to_noise`` is finite)."""
     limit = residual_limit(residual_to_noise)
     with np.errstate(invalid="ignore"):
         valid = ((residual_to_noise <= limit)
@@ -294,4 +301,5 @@ def node_validity(residual_to_noise: np.ndarray, texture_ratio: np.ndarray,
                         texture_ratio=np.asarray(texture_ratio, float),
                         conditioning=np.asarray(conditioning, float),
                         neighbour_ratio=np.asarray(neighbour, float), valid=np.asarray(valid, bool),
-                        residual_limit=limit)
+                        seen=np.asarray(np.isfinite(residual_to_noise) if seen is None else seen,
+                                        bool), residual_limit=limit)

@@ -28,6 +28,9 @@ A complete example (optional keys show their default in parentheses)::
                                   # images built and factorized once per scale for every
                                   # iteration and frame; "current": full Gauss-Newton, H
                                   # rebuilt at each iteration      (default "reference")
+    max_invalid_share = 0.03      # a frame fails when more of its nodes than this share are
+                                  # not valid locally (residual over the local noise,
+                                  # texture, conditioning, neighbours)      (default 0.03)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
@@ -48,6 +51,7 @@ from pathlib import Path
 from typing import Any
 
 from fesdic_core.displacement.driver import JACOBIANS
+from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
                                        OutputConfig, cameras_table, geometry_table, images_table, method_table)
@@ -82,6 +86,7 @@ class DisplacementConfig:
     tikhonov_length_mm: float = 10.0
     levels: int = 2
     jacobian: str = "reference"
+    max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:
@@ -167,7 +172,9 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
         tikhonov_length_mm=t.take("tikhonov_length_mm", number, "a number (mm)",
                                   default=d.tikhonov_length_mm),
         levels=t.take("levels", integer, "an integer", default=d.levels),
-        jacobian=t.take("jacobian", string, "a string", default=d.jacobian))
+        jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
+        max_invalid_share=t.take("max_invalid_share", number, "a number (a share, 0 to 1)",
+                                 default=d.max_invalid_share))
     t.finish()
     check(t, "method", c.method, c.method in DISPLACEMENT_METHODS,
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
@@ -176,6 +183,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "levels", c.levels, c.levels >= 1, ">= 1")
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))
+    check(t, "max_invalid_share", c.max_invalid_share, 0.0 <= c.max_invalid_share <= 1.0,
+          "a share in [0, 1]")
     return c
 
 

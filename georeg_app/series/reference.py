@@ -141,7 +141,8 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     d = config.displacement
     settings = DisplacementSettings(scales=d.scale_sequence,
                                     normalisation=config.method.normalisation,
-                                    jacobian=d.jacobian)
+                                    jacobian=d.jacobian,
+                                    max_invalid_share=d.max_invalid_share)
     reference = displacement_reference(mesh, images, cameras, settings)
     solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
