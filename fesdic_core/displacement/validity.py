@@ -18,16 +18,18 @@ Per node ``I`` of the reference surface, on its support (the points ``L_I`` weig
 """
 from __future__ import annotations
 
+import weakref
 from typing import Sequence
 
 import numpy as np
+import scipy.sparse as sps
 
 from fesdic_core.displacement.residual import DisplacementResidual, ReferenceView
-from fesdic_core.residual.validity import (NodeValidity, Support, block_conditioning,
-                                           local_noise_gray, local_texture_ratio, neighbour_ratio,
+from fesdic_core.residual.validity import (LocalImage, NodeValidity, Support, block_conditioning,
+                                           local_image, local_noise_gray, neighbour_ratio,
                                            node_neighbours, node_validity)
 
-__all__ = ["node_blocks", "displacement_validity"]
+__all__ = ["node_blocks", "hessian_blocks", "displacement_validity"]
 
 
 def node_blocks(support: Support, weighted_dr_du: np.ndarray, weights: np.ndarray
@@ -42,6 +44,19 @@ def node_blocks(support: Support, weighted_dr_du: np.ndarray, weights: np.ndarra
     return support.total(P).reshape(-1, 3, 3)
 
 
+def hessian_blocks(H: sps.spmatrix) -> np.ndarray:
+    """(n, 3, 3) the diagonal blocks ``H[3 I + k, 3 I + l]`` of a symmetric (3n, 3n) ``H`` in
+    the node-major layout (from its three upper diagonals)."""
+    H = sps.csr_matrix(H)
+    n = H.shape[0] // 3
+    blocks = np.empty((n, 3, 3))
+    for d in range(3):
+        diagonal = H.diagonal(d)
+        for k in range(3 - d):
+            blocks[:, k, k + d] = blocks[:, k + d, k] = diagonal[k::3][:n]
+    return blocks
+
+
 def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.ndarray,
                           nodes: np.ndarray, images: Sequence, contrast_ratios: Sequence[float],
                           blocks: np.ndarray | None = None) -> NodeValidity:
@@ -51,8 +66,8 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
 
     ``contrast_ratios``: per camera, the reference image's contrast over the deformed one's
     over the region (:class:`~fesdic_core.imaging.noise.NoiseFloor`); ``blocks``: the nodes'
-    diagonal blocks of ``H`` (default: from the view's reference Jacobian, or the residual's
-    own derivative when the view has none).
+    diagonal blocks of ``H`` (default: those of the view's reference ``H``; without it, from
+    the residual's own derivative).
     """
     quad = view.quad
     support = Support(quad)
@@ -64,19 +79,20 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
     squared = sum(support.total(w[c] * percent[c] ** 2) for c in range(2))
     noise2, sigma_r2 = np.zeros(quad.n_nodes), np.zeros(quad.n_nodes)
     texture = np.full(quad.n_nodes, np.inf)
+    reference = _reference_images(view, support)
     for c in range(2):
-        cams = (view.cameras[c], view.cameras[c])
-        gray = local_noise_gray(support, w[c], (view.images[c], images[c]), cams, (view.X, X1),
-                                contrast_ratios[c])
+        camera = view.cameras[c]
+        before = reference[c]
+        after = local_image(support, w[c], images[c], camera, X1)
+        gray = local_noise_gray(before, after, contrast_ratios[c])
         floor = np.nan_to_num(100.0 * gray / res.dynamic_range[c])
         noise2 += seen_weight[c] * floor ** 2
         scale = support.mean(res.sigma_ref[c], w[c])
         with np.errstate(invalid="ignore", divide="ignore"):
             sigma_r2 += seen_weight[c] * np.nan_to_num(gray / scale) ** 2
         seen = seen_weight[c] > 0
-        for image, X in ((view.images[c], view.X), (images[c], X1)):
-            ratio = local_texture_ratio(support, w[c], image, view.cameras[c], X)
-            texture = np.where(seen, np.minimum(texture, ratio), texture)
+        for local in (before, after):
+            texture = np.where(seen, np.minimum(texture, local.texture_ratio), texture)
     total = seen_weight.sum(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         residual_to_noise = np.where(total > 0, np.sqrt(squared / noise2), np.nan)
@@ -84,8 +100,8 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
         mean_weight = sum(support.total(w[c] * w[c]) for c in range(2)) / total
     texture = np.where(np.isfinite(texture), texture, 0.0)
     if blocks is None:
-        if view.dr_du is not None:
-            blocks = node_blocks(support, view.dr_du, np.where(view.seen, quad.weight_mm2, 0.0))
+        if view.hessian is not None:
+            blocks = hessian_blocks(view.hessian)
         else:
             blocks = node_blocks(support, res.dr_du * w[:, :, None], w)
     conditioning = block_conditioning(blocks, support.total(quad.weight_mm2))
@@ -93,6 +109,20 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
     neighbours = node_neighbours([g.connectivity for g in quad.groups], quad.n_nodes)
     return node_validity(residual_to_noise, texture, conditioning,
                          neighbour_ratio(neighbours, nodes, U, std), seen=total > 0)
+
+
+#: each reference view's local images (the same for every frame of a series), per process
+_REFERENCE_IMAGES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _reference_images(view: ReferenceView, support: Support) -> tuple[LocalImage, LocalImage]:
+    """The reference images over the nodes' supports (the points each camera sees in its
+    reference image), computed once per view."""
+    if view not in _REFERENCE_IMAGES:
+        w = np.where(view.seen, view.quad.weight_mm2, 0.0)
+        _REFERENCE_IMAGES[view] = tuple(local_image(support, w[c], view.images[c],
+                                                     view.cameras[c], view.X) for c in range(2))
+    return _REFERENCE_IMAGES[view]
 
 
 def _predicted_std(blocks: np.ndarray, sigma_r: np.ndarray, mean_weight: np.ndarray

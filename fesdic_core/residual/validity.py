@@ -4,13 +4,15 @@ The verdict of a measurement (:func:`fesdic_core.shape.verdict.judge`) is global
 residual over every point against the noise floor over every point. A field can pass it
 with a few nodes far off (a local divergence of plain FE on a fine mesh: the global
 residual barely moves when a few elements do not match). Each node ``I`` is judged here on
-its *support*, the integration points its shape function ``L_I`` weighs (weights
-``w_g L_I(xi_g)``, as the residual map at the nodes):
+its *support*, the integration points its shape function ``L_I`` weighs (:class:`Support`:
+weights ``w_g L_I(xi_g)**2``, those of the node's own block of ``H``, positive for every
+element family, where the residual map at the nodes weighs by ``L_I``):
 
 - ``residual_to_noise``: the root mean square of the residual over the support against
   the noise floor of :func:`~fesdic_core.imaging.noise.residual_noise_floor` taken on the
   same support (Immerkaer's estimate averaged over the pixels the support projects to,
-  :func:`~fesdic_core.imaging.noise.immerkaer_response`, with each image model's gain);
+  :func:`~fesdic_core.imaging.noise.immerkaer_response`, with each image model's gain); it
+  passes up to :func:`residual_limit` (twice the median node's, within [0.5, 3]);
 - ``texture_ratio``: the contrast of the gray levels over the support against that local
   noise (the global texture check of :data:`~fesdic_core.imaging.noise.MIN_TEXTURE_RATIO`,
   on the support), the worst image;
@@ -25,7 +27,8 @@ its *support*, the integration points its shape function ``L_I`` weighs (weights
 
 A node is ``valid`` when the four pass (:func:`node_validity`); the thresholds below are
 the one place where they are set. A measurement fails when the share of invalid nodes
-exceeds its ``max_invalid_share`` (:meth:`NodeValidity.failure`, naming the worst node).
+among those the images see exceeds its ``max_invalid_share`` (:meth:`NodeValidity.failure`,
+naming the worst node); a node no point sees is invalid, not counted in that share.
 
 The thresholds were chosen on renders with known truth (``benchmarks/bench_validity.py``:
 a flat plate whose paint is then twisted by 1 mm and made wavy, plain FE on a fine mesh
@@ -47,7 +50,7 @@ from fesdic_core.imaging.noise import immerkaer_response
 __all__ = ["MAX_RESIDUAL_TO_NOISE", "MIN_NODE_TEXTURE_RATIO", "MIN_NODE_CONDITIONING",
            "MAX_NEIGHBOUR_RATIO", "DEFAULT_MAX_INVALID_SHARE", "RESIDUAL_FACTOR",
            "EXPLAINED_RESIDUAL_TO_NOISE", "residual_limit", "NodeValidity", "Support",
-           "local_noise_gray", "local_texture_ratio", "block_conditioning", "node_neighbours",
+           "LocalImage", "local_image", "local_noise_gray", "block_conditioning", "node_neighbours",
            "neighbour_ratio", "node_validity"]
 
 # The thresholds, measured with ``benchmarks/bench_validity.py`` (see the module docstring):
@@ -140,73 +143,89 @@ class NodeValidity:
 class Support:
     """Each node's support in a quadrature: its points, weighed by ``L_I(xi_g)**2`` (positive
     for every family: a Q9 or T6 corner's ``L_I`` turns negative inside its elements), the
-    weight of a point in the node's own block of ``H``.
-
-    Attributes
-    ----------
-    L2T : (n, g) csr, ``L_I(xi_g)**2``
+    weight of a point in the node's own block of ``H``. Sums are taken element group by
+    element group (:class:`~fesdic_core.fe.quadrature.ElementGroup`), as
+    :meth:`~fesdic_core.fe.quadrature.PixelQuadrature.to_nodes` does with ``L_I``.
     """
 
     def __init__(self, quad: PixelQuadrature):
         self.quad = quad
-        self.L2T = quad.L.multiply(quad.L).T.tocsr()
 
     def total(self, values: np.ndarray) -> np.ndarray:
-        """(n,) ``sum_g L_I**2 v_g`` of point values (g,) or (g, k) -> (n, k)."""
-        return np.asarray(self.L2T @ values)
+        """``sum_g L_I**2 v_g`` of point values (g,) -> (n,), or (g, k) -> (n, k)."""
+        values = np.asarray(values, float)
+        k = values.shape[1:]
+        flat = values.reshape(len(values), -1)
+        out = np.zeros((self.quad.n_nodes, flat.shape[1]))
+        for group in self.quad.groups:
+            E, (m, nn) = len(group.elements), group.N.shape
+            local = flat[group.span].reshape(E, m, -1).transpose(0, 2, 1)       # (E, k, m)
+            gathered = (local @ group.N ** 2).transpose(0, 2, 1)               # (E, nn, k)
+            for c in range(flat.shape[1]):
+                out[:, c] += np.bincount(group.connectivity.ravel(),
+                                         weights=gathered[..., c].ravel(),
+                                         minlength=self.quad.n_nodes)
+        return out.reshape((self.quad.n_nodes,) + k)
 
     def mean(self, values: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """(n,) ``sum_g L_I**2 w_g v_g / sum_g L_I**2 w_g`` for point values and weights (g,)
-        (NaN for a node of zero weight)."""
-        total = self.total(weights * np.nan_to_num(values))
-        weight = self.total(weights)
+        """``sum_g L_I**2 w_g v_g / sum_g L_I**2 w_g`` for point values (g,) or (g, k) and
+        weights (g,) -> (n,) or (n, k) (NaN for a node of zero weight; the values must be
+        finite where the weight is not zero)."""
+        values = np.asarray(values, float)
+        weighted = (weights * values.T).T
+        totals = self.total(np.column_stack([weights, weighted.reshape(len(values), -1)]))
+        weight, total = totals[:, 0], totals[:, 1:].reshape((-1,) + values.shape[1:])
+        safe = np.where(weight > 0, weight, 1.0).reshape((-1,) + (1,) * (values.ndim - 1))
+        inside = (weight > 0).reshape(safe.shape)
+        return np.where(inside, total / safe, np.nan)
+
+
+@dataclass(frozen=True)
+class LocalImage:
+    """One image over each node's support (all (n,); NaN for a node none of whose points
+    are seen): ``sigma`` Immerkaer's noise (raw gray levels) and ``contrast`` the standard
+    deviation of the raw gray levels, both weighed as :class:`Support`; ``gain`` the image
+    model's white-noise gain (:attr:`~fesdic_core.imaging.image.Image.noise_gain`)."""
+
+    sigma: np.ndarray
+    contrast: np.ndarray
+    gain: float
+
+    @property
+    def texture_ratio(self) -> np.ndarray:
+        """(n,) contrast over noise (0 where unseen or uniform, inf where noise-free)."""
+        sigma, contrast = self.sigma, self.contrast
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(weight > 0, total / np.where(weight > 0, weight, 1.0), np.nan)
+            ratio = np.where(sigma > 0, contrast / np.where(sigma > 0, sigma, 1.0),
+                             np.where(contrast > 0, np.inf, 0.0))
+        return np.nan_to_num(ratio, nan=0.0, posinf=np.inf)
 
 
-def _projected(image, camera, X: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    xy = np.zeros((len(X), 2))
-    if seen.any():
-        xy[seen] = camera.project(X[seen])
-    return xy
-
-
-def local_noise_gray(support: Support, weights: np.ndarray, images: Sequence,
-                     cameras: Sequence, points: Sequence[np.ndarray], contrast_ratio: float
-                     ) -> np.ndarray:
-    """(n,) the noise floor of one residual on each node's support, in gray levels of the
-    first image: ``sqrt((k_0 sigma_0)**2 + (s_0/s_1)**2 (k_1 sigma_1)**2)`` with ``sigma_c``
-    Immerkaer's estimate of image ``c`` averaged over the support (at ``points[c]`` (g, 3), its
-    points in that image), ``k_c`` its model's gain and ``contrast_ratio`` ``s_0/s_1``, as
-    :func:`~fesdic_core.imaging.noise.residual_noise_floor` does over the whole region.
-    ``weights``: (g,) ``w_g`` at the points the residual sees, 0 elsewhere."""
+def local_image(support: Support, weights: np.ndarray, image, camera, X: np.ndarray
+                ) -> LocalImage:
+    """``image`` (an :class:`~fesdic_core.imaging.image.Image`) seen by ``camera`` at the
+    points ``X`` (g, 3), over each node's support; ``weights`` (g,): ``w_g`` at the points
+    the residual sees, 0 elsewhere (one projection and one pass of Immerkaer's operator)."""
     seen = weights > 0
-    parts = []
-    for k, (image, camera, X) in enumerate(zip(images, cameras, points)):
-        response = immerkaer_response(image.values, _projected(image, camera, X, seen))
-        gain = float(getattr(image, "noise_gain", 1.0)) * (1.0 if k == 0 else contrast_ratio)
-        parts.append(gain * support.mean(np.where(seen, response, 0.0), weights))
-    return np.hypot(parts[0], parts[1])
-
-
-def local_texture_ratio(support: Support, weights: np.ndarray, image, camera,
-                        X: np.ndarray) -> np.ndarray:
-    """(n,) standard deviation of ``image``'s raw gray levels over each node's support (at
-    the points ``X`` (g, 3), weights (g,)) over Immerkaer's noise there (0 unseen)."""
-    seen = weights > 0
-    xy = _projected(image, camera, X, seen)
+    with np.errstate(invalid="ignore"):
+        xy = np.nan_to_num(camera.project(X))          # (the unseen points weigh nothing)
     h, w = image.shape
-    col = np.clip(np.rint(xy[:, 0]).astype(np.int64), 0, w - 1)
-    row = np.clip(np.rint(xy[:, 1]).astype(np.int64), 0, h - 1)
-    gray = np.where(seen, np.asarray(image.values, float)[row, col], 0.0)
-    mean = support.mean(gray, weights)
-    second = support.mean(gray * gray, weights)
-    sigma = support.mean(np.where(seen, immerkaer_response(image.values, xy), 0.0), weights)
-    contrast = np.sqrt(np.maximum(second - mean ** 2, 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(sigma > 0, contrast / np.where(sigma > 0, sigma, 1.0),
-                         np.where(contrast > 0, np.inf, 0.0))
-    return np.nan_to_num(ratio, nan=0.0)
+    col = np.clip(np.rint(xy[:, 0]), 0, w - 1).astype(np.int64)
+    row = np.clip(np.rint(xy[:, 1]), 0, h - 1).astype(np.int64)
+    gray = np.asarray(image.values, float)[row, col]
+    stats = np.column_stack([gray, gray * gray, immerkaer_response(image.values, xy)])
+    mean, second, sigma = support.mean(np.where(seen[:, None], stats, 0.0), weights).T
+    return LocalImage(sigma=sigma, contrast=np.sqrt(np.maximum(second - mean ** 2, 0.0)),
+                      gain=float(getattr(image, "noise_gain", 1.0)))
+
+
+def local_noise_gray(first: LocalImage, second: LocalImage, contrast_ratio: float) -> np.ndarray:
+    """(n,) the noise floor of a residual between two images on each node's support, in gray
+    levels of the first: ``sqrt((k_0 sigma_0)**2 + (s_0/s_1)**2 (k_1 sigma_1)**2)`` with the
+    images' local noise ``sigma_c`` and gains ``k_c`` (:func:`local_image`) and
+    ``contrast_ratio`` ``s_0/s_1``, as :func:`~fesdic_core.imaging.noise.residual_noise_floor`
+    does over the whole region."""
+    return np.hypot(first.gain * first.sigma, contrast_ratio * second.gain * second.sigma)
 
 
 def block_conditioning(blocks: np.ndarray, area: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.imaging.noise import residual_noise_floor
 from fesdic_core.residual.graylevel import GrayLevelResidual
 from fesdic_core.residual.validity import (NodeValidity, Support, block_conditioning,
-                                           local_noise_gray, local_texture_ratio, neighbour_ratio,
+                                           local_image, local_noise_gray, neighbour_ratio,
                                            node_neighbours, node_validity)
 
 __all__ = ["shape_validity"]
@@ -47,13 +47,12 @@ def shape_validity(mesh: SurfaceMesh, nodes: np.ndarray, q: np.ndarray, quad: Pi
     w = np.where(residual.mask, quad.weight_mm2, 0.0)
     floor = residual_noise_floor(X, residual.mask, images, cameras)
     ratio = floor.contrast[0] / floor.contrast[1] if floor.contrast[1] > 0 else 1.0
-    gray = local_noise_gray(support, w, images, cameras, (X, X), ratio)
-    noise = 100.0 * gray / float(residual.dynamic_range)
+    local = [local_image(support, w, image, camera, X) for image, camera in zip(images, cameras)]
+    noise = 100.0 * local_noise_gray(local[0], local[1], ratio) / float(residual.dynamic_range)
     squared = support.mean(np.nan_to_num(residual.percent) ** 2, w)
     with np.errstate(invalid="ignore", divide="ignore"):
         residual_to_noise = np.sqrt(squared) / noise
-    texture = np.minimum(*(local_texture_ratio(support, w, image, camera, X)
-                           for image, camera in zip(images, cameras)))
+    texture = np.minimum(local[0].texture_ratio, local[1].texture_ratio)
     if H is None:
         conditioning = np.ones(len(q))
     else:

@@ -111,3 +111,21 @@ def test_the_local_noise_estimate_is_immerkaer_s_pixel_by_pixel():
     assert response.shape == (5000,)
     assert np.mean(response) == pytest.approx(immerkaer_sigma(values, xy), rel=1e-12)
     assert np.mean(response) == pytest.approx(3.0, rel=0.05)
+
+
+@pytest.mark.parametrize("family", ["Q4", "Q9", "T3", "T6"])
+def test_support_sums_weigh_the_points_by_the_squared_shape_functions(family):
+    """Support.total is (L**2)^T v for one and several components, group by group."""
+    from fesdic_core.fe.quadrature import pixel_quadrature
+    from fesdic_core.residual.validity import Support
+    from fesdic_core.synthetic.render import demo_cameras
+    mesh = rectangle_mesh(30.0, 20.0, 3, 2, family=family)
+    quad = pixel_quadrature(mesh, demo_cameras(image_size=(160, 120), field_mm=48.0))
+    rng = np.random.default_rng(3)
+    v = rng.standard_normal((quad.n_points, 4))
+    L2 = quad.L.multiply(quad.L).toarray()
+    support = Support(quad)
+    np.testing.assert_allclose(support.total(v), L2.T @ v, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(support.total(v[:, 0]), L2.T @ v[:, 0], rtol=1e-12, atol=1e-12)
+    w = rng.uniform(0.0, 1.0, quad.n_points)
+    np.testing.assert_allclose(support.mean(v[:, 1], w), (L2.T @ (w * v[:, 1])) / (L2.T @ w))
