@@ -10,10 +10,12 @@ from fesdic_core.displacement.residual import (ReferenceView, DisplacementResidu
                                                component_dofs)
 from fesdic_core.displacement.solvers import componentwise, ComponentTikhonovSolver
 from fesdic_core.displacement.strain import tangent_frame, surface_green_lagrange, RECOVERIES
+from fesdic_core.displacement.validity import node_blocks, hessian_blocks, displacement_validity
 
 __all__ = ["JACOBIANS", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
            "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
            "measure_displacement", "displacement_verdict", "ReferenceView", "DisplacementResidual",
            "reference_view", "reference_jacobian", "displacement_residual",
            "displacement_operators", "displacement_rhs", "component_dofs", "componentwise",
-           "ComponentTikhonovSolver", "tangent_frame", "surface_green_lagrange", "RECOVERIES"]
+           "ComponentTikhonovSolver", "tangent_frame", "surface_green_lagrange", "RECOVERIES",
+           "node_blocks", "hessian_blocks", "displacement_validity"]
