@@ -7,6 +7,7 @@
     georeg compare CONFIG.toml [--out DIR] [--overwrite]  # FE, Tikhonov, georeg multi/monoscale
     georeg track   CONFIG.toml [--out DIR] [--overwrite] [--scheduler S]  # displacement series
     georeg preview CONFIG.toml [--out DIR] [--overwrite]  # the set-up at a glance, no measuring
+    georeg calibrate CONFIG.toml [--out DIR] [--overwrite]  # the rig from target images
 
 Global options: ``--quiet`` (warnings only, no progress bars), ``--verbose`` (debug log,
 tracebacks on error), ``--version``. A user error (bad input: a configuration, image,
@@ -108,6 +109,13 @@ def build_parser() -> argparse.ArgumentParser:
                          help=f"output folder (default: {DEFAULT_PREVIEW_OUT})")
     preview.add_argument("--overwrite", action="store_true",
                          help="replace the contents of a non-empty output folder")
+    calibrate = sub.add_parser("calibrate", help="calibrate the stereo rig from pairs of target "
+                                                 "images ([images], [target], [model])")
+    calibrate.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
+    calibrate.add_argument("--out", type=Path, default=None,
+                           help="output folder (default: [output] dir of the configuration)")
+    calibrate.add_argument("--overwrite", action="store_true",
+                           help="replace the contents of a non-empty output folder")
     for p in sub.choices.values():
         _common(p, suppress=True)
     return parser
@@ -183,6 +191,8 @@ def _run(args: argparse.Namespace) -> Path:
         return _run_track(args, progress_enabled(args.quiet))
     if args.command == "preview":
         return _run_preview(args)
+    if args.command == "calibrate":
+        return _run_calibrate(args, progress_enabled(args.quiet))
     config = None if args.command == "demo" else load_config(args.config)   # fail fast
     out = args.out if (config is None or args.out is not None) else config.output.dir
     check_output_folder(out, args.overwrite)                                  # before computing
@@ -284,6 +294,27 @@ def _run_preview(args: argparse.Namespace) -> Path:
                        100 * (1.0 - seen["both"]))
     write_preview(args.out, p, overwrite=args.overwrite)
     return Path(args.out) / "preview.png"
+
+
+def _run_calibrate(args: argparse.Namespace, progress: bool) -> Path:
+    """Run ``georeg calibrate``; returns the path of the report written."""
+    from georeg_app.calibrate import load_calibrate_config, run_calibration, write_calibration
+    from georeg_app.calibrate.outputs import REPORT_FILE
+
+    config = load_calibrate_config(args.config)                               # fail fast
+    out = args.out if args.out is not None else config.output.dir
+    check_output_folder(out, args.overwrite)                                  # before computing
+    run = run_calibration(config.with_output_dir(out), progress)
+    cal = run.calibration
+    used = sum(v.status == "used" for v in cal.views)
+    for v in cal.views:
+        if v.status != "used":
+            logger.warning("view %d (%s) left out: %s", v.index, Path(v.sources[0]).name, v.status)
+    logger.info("calibrated from %d of %d views: reprojection RMS %.4f px, baseline %.4f mm, "
+                "stereo angle %.4f deg", used, len(cal.views), cal.rms_px, cal.baseline_mm,
+                cal.stereo_angle_deg)
+    write_calibration(out, run, overwrite=args.overwrite)
+    return Path(out) / REPORT_FILE
 
 
 def _error_line(err: BaseException) -> str:

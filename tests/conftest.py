@@ -55,6 +55,14 @@ def family_scenes():
 
 
 @pytest.fixture(scope="session")
+def dot_target_views():
+    """Eight rendered stereo views of a dot target with ring markers, and the true rig
+    (target_views.py)."""
+    import target_views
+    return target_views.render_views()
+
+
+@pytest.fixture(scope="session")
 def twist_wave_pair():
     """The displacement tests' flat plate, then the same paint twisted and wavy (scenes.py)."""
     return scenes.twist_wave_pair()

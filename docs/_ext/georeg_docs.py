@@ -252,8 +252,10 @@ def _docstring_example(module: types.ModuleType) -> list[str]:
 
 def config_page() -> str:
     """The reST source of the TOML reference, from the readers' dataclasses and docstrings."""
+    from georeg_app.calibrate import config as calibrate
     from georeg_app.config import measure, track
-    lines = [".. This page is generated from georeg_app.config.measure and .track at build time.",
+    lines = [".. This page is generated from georeg_app.config.measure, .track and "
+             "georeg_app.calibrate.config at build time.",
              "", _title("TOML reference"),
              "Keys, types and defaults are read from the dataclasses that the readers",
              "(:func:`georeg_app.config.measure.load_config`,",
@@ -289,7 +291,15 @@ def config_page() -> str:
              + "; ``[cameras]`` exactly one of "
              + ", ".join(f"``{v}``" for v in measure.CAMERA_SOURCES)
              + "; ``[displacement] method`` one of "
-             + ", ".join(f'``"{v}"``' for v in track.DISPLACEMENT_METHODS) + ".", ""]
+             + ", ".join(f'``"{v}"``' for v in track.DISPLACEMENT_METHODS) + ".", "",
+             _title("``georeg calibrate``", "-"),
+             *_docstring_example(calibrate),
+             "``[target]`` fills :class:`fesdic_core.cameras.targets.target.Target`, ``[model]``",
+             ":class:`fesdic_core.cameras.targets.calibration.CalibrationModel`; ``[compare]`` takes",
+             "one key of ``[cameras]`` (no landmarks), ``[check]`` a speckle pair ``cam0``, ``cam1``.",
+             "", *_section_table("target", calibrate.Target),
+             *_section_table("model", calibrate.CalibrationModel),
+             f"``[output] dir`` defaults to ``\"{calibrate.DEFAULT_CALIBRATION_DIR}\"``.", ""]
     return "\n".join(lines)
 
 

@@ -8,7 +8,8 @@ from fesdic_core.cameras.rig import (CalibrationError, stereo_transform, place_c
                                      write_cameras_json, read_pyvale_csv, initial_pose,
                                      initial_rig_pose)
 from fesdic_core.cameras.triangulation import (StereoPoints, normalised_points,
-                                               epipolar_distance_px, triangulate, match_features,
+                                               epipolar_distance_px, triangulate, Features,
+                                               detect_features, match_descriptors, match_features,
                                                stereo_points)
 
 __all__ = ["Camera", "Linearisation", "rodrigues", "read_opencv_stereo", "write_opencv_stereo",
@@ -16,4 +17,5 @@ __all__ = ["Camera", "Linearisation", "rodrigues", "read_opencv_stereo", "write_
            "CalibrationError", "stereo_transform", "place_camera1", "apply_stereo",
            "stereo_extrinsic_jacobian", "read_cameras_json", "write_cameras_json",
            "read_pyvale_csv", "initial_pose", "initial_rig_pose", "StereoPoints", "normalised_points",
-           "epipolar_distance_px", "triangulate", "match_features", "stereo_points"]
+           "epipolar_distance_px", "triangulate", "Features", "detect_features",
+           "match_descriptors", "match_features", "stereo_points"]

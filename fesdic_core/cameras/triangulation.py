@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -21,7 +22,8 @@ from fesdic_core.cameras.rig import stereo_transform
 logger = logging.getLogger(__name__)
 
 __all__ = ["StereoPoints", "normalised_points", "epipolar_distance_px", "triangulate",
-           "match_features", "stereo_points", "DEFAULT_MAX_EPIPOLAR_PX", "RATIO_TEST"]
+           "Features", "detect_features", "match_descriptors", "match_features", "stereo_points",
+           "DEFAULT_MAX_EPIPOLAR_PX", "RATIO_TEST"]
 
 #: matches farther than this from their epipolar line (px, in camera 1) are outliers
 DEFAULT_MAX_EPIPOLAR_PX = 1.0
@@ -125,37 +127,103 @@ def _gray8(values: np.ndarray) -> np.ndarray:
         np.round(255.0 * (v - lo) / (hi - lo)).astype(np.uint8)
 
 
+def _spread(keypoints: Sequence, shape: tuple[int, int], cells: int, quota: int) -> list:
+    """The ``quota`` strongest keypoints of each of ``cells x cells`` tiles of an image of
+    ``shape`` (h, w): features spread over the image, not only where the contrast is best."""
+    if not keypoints:
+        return []
+    xy = np.array([k.pt for k in keypoints])
+    response = np.array([k.response for k in keypoints])
+    tile = (np.minimum((xy[:, 1] * cells / shape[0]).astype(int), cells - 1) * cells
+            + np.minimum((xy[:, 0] * cells / shape[1]).astype(int), cells - 1))
+    order = np.lexsort((-response, tile))                      # by tile, strongest first
+    first = np.searchsorted(tile[order], tile[order], side="left")
+    rank = np.arange(len(order)) - first
+    return [keypoints[i] for i in order[rank < quota]]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Features:
+    """SIFT features of one image: ``px`` (k, 2) pixels (x = column, y = row) and
+    ``descriptors`` (k, 128) float32."""
+
+    px: np.ndarray
+    descriptors: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.px)
+
+
+def detect_features(values: np.ndarray, mask: np.ndarray | None = None,
+                    max_features: int = 5000, spread_cells: int = 0) -> Features:
+    """SIFT features of an image (inside ``mask``).
+
+    Parameters
+    ----------
+    values : (h, w) gray levels.
+    mask : (h, w) bool, where features are looked for (None: everywhere).
+    max_features : at most this many features.
+    spread_cells : 0: the ``max_features`` strongest; ``k > 0``: the ``max_features / k**2``
+        strongest of each of ``k x k`` tiles of the image (features where the contrast is
+        weaker too, e.g. under uneven lighting).
+
+    Returns
+    -------
+    Features (possibly empty).
+    """
+    image = _gray8(values)
+    m = None if mask is None else np.asarray(mask, bool).astype(np.uint8) * 255
+    if spread_cells > 0:
+        sift = cv2.SIFT_create()  # type: ignore[attr-defined]
+        quota = int(np.ceil(max_features / spread_cells ** 2))
+        keypoints = _spread(sift.detect(image, m), image.shape, spread_cells, quota)
+        keypoints, descriptors = sift.compute(image, keypoints) if keypoints else ((), None)
+    else:
+        sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
+        keypoints, descriptors = sift.detectAndCompute(image, m)
+    if descriptors is None or len(keypoints) == 0:
+        return Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32))
+    return Features(np.array([k.pt for k in keypoints], dtype=np.float64).reshape(-1, 2),
+                    np.asarray(descriptors, np.float32))
+
+
+def match_descriptors(features0: Features, features1: Features) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (n,) and (n,) of the matches of ``features0`` in ``features1``: nearest
+    descriptor (L2, brute force), Lowe's ratio test."""
+    if len(features0) < 2 or len(features1) < 2:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(features0.descriptors, features1.descriptors, k=2)
+    good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < RATIO_TEST * p[1].distance]
+    return (np.array([m.queryIdx for m in good], dtype=np.intp),
+            np.array([m.trainIdx for m in good], dtype=np.intp))
+
+
 def match_features(values0: np.ndarray, values1: np.ndarray, mask0: np.ndarray | None = None,
-                   max_features: int = 5000) -> tuple[np.ndarray, np.ndarray, int]:
+                   max_features: int = 5000, spread_cells: int = 0
+                   ) -> tuple[np.ndarray, np.ndarray, int]:
     """SIFT matches of image 0 (inside ``mask0``) in image 1, Lowe's ratio test.
 
     Parameters
     ----------
     values0, values1 : (h, w) gray levels of the two images.
     mask0 : (h, w) bool, where features of image 0 are looked for (None: everywhere).
-    max_features : at most this many features per image.
+    max_features, spread_cells : the features of each image (:func:`detect_features`).
 
     Returns
     -------
     px0, px1 : (n, 2) matched pixels (x = column, y = row).
     n_features : the features found in image 0 (inside the mask).
     """
-    sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
-    m0 = None if mask0 is None else np.asarray(mask0, bool).astype(np.uint8) * 255
-    k0, d0 = sift.detectAndCompute(_gray8(values0), m0)
-    k1, d1 = sift.detectAndCompute(_gray8(values1), None)
-    if d0 is None or d1 is None or len(k0) < 2 or len(k1) < 2:
-        return np.zeros((0, 2)), np.zeros((0, 2)), len(k0)
-    pairs = cv2.BFMatcher(cv2.NORM_L2).knnMatch(d0, d1, k=2)
-    good = [p[0] for p in pairs if len(p) == 2 and p[0].distance < RATIO_TEST * p[1].distance]
-    px0 = np.array([k0[m.queryIdx].pt for m in good], dtype=np.float64).reshape(-1, 2)
-    px1 = np.array([k1[m.trainIdx].pt for m in good], dtype=np.float64).reshape(-1, 2)
-    return px0, px1, len(k0)
+    f0 = detect_features(values0, mask0, max_features, spread_cells)
+    f1 = detect_features(values1, None, max_features, spread_cells)
+    i0, i1 = match_descriptors(f0, f1)
+    return f0.px[i0], f1.px[i1], len(f0)
 
 
 def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.ndarray,
                   mask0: np.ndarray | None = None,
-                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX) -> StereoPoints:
+                  max_epipolar_px: float = DEFAULT_MAX_EPIPOLAR_PX, max_features: int = 5000,
+                  spread_cells: int = 0) -> StereoPoints:
     """Matches inside ``mask0`` that agree with the calibrated epipolar geometry, triangulated.
 
     Parameters
@@ -164,12 +232,13 @@ def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.n
     values0, values1 : (h, w) gray levels of camera 0's and camera 1's images.
     mask0 : (h, w) bool, the region of camera 0's image to match (None: all).
     max_epipolar_px : matches farther from their epipolar line (px) are dropped.
+    max_features, spread_cells : the features of each image (:func:`match_features`).
 
     Returns
     -------
     StereoPoints (possibly empty: the caller judges whether there are enough).
     """
-    px0, px1, n_features = match_features(values0, values1, mask0)
+    px0, px1, n_features = match_features(values0, values1, mask0, max_features, spread_cells)
     n = len(px0)
     if n == 0:
         logger.info("stereo matches: %d features in camera 0, no match", n_features)

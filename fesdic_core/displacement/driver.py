@@ -45,12 +45,12 @@ from fesdic_core.checks import MeasurementInputError, check_inputs, check_scales
 from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
                                                displacement_operators, displacement_residual,
                                                displacement_rhs, reference_view)
-from fesdic_core.displacement.validity import displacement_validity, node_blocks
+from fesdic_core.displacement.validity import displacement_validity, residual_blocks
 from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.fe.quadrature import pixel_quadrature
 from fesdic_core.imaging.image import Image, pyramid
 from fesdic_core.imaging.noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
-from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE, NodeValidity, Support
+from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE, NodeValidity
 from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 from fesdic_core.shape.verdict import judge
@@ -59,11 +59,16 @@ from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StartSc
 
 logger = logging.getLogger(__name__)
 
+#: a coarse scale whose elements hold fewer integration points than this (median) is left
+#: out: the per-element normalisation of one point makes its residual identically zero (the
+#: scale "converges" in 0 iterations at 0 %), and an element of a few pixels holds no texture
+MIN_POINTS_PER_ELEMENT = 16
+
 #: the Jacobian of the displacement's Gauss-Newton: the reference images' (modified
 #: Gauss-Newton, H once per scale) or the deformed images' at the current state (full)
 JACOBIANS = ("reference", "current")
 
-__all__ = ["JACOBIANS", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
+__all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
            "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
            "measure_displacement", "displacement_verdict"]
 
@@ -134,7 +139,11 @@ def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: 
                            ) -> DisplacementReference:
     """The reference of a series: ``mesh`` is the reference surface (measured nodes, mm),
     ``images`` and ``cameras`` the reference stereo pair and its calibrated cameras
-    (full resolution). Raises :class:`MeasurementInputError` for inputs that do not fit."""
+    (full resolution). Raises :class:`MeasurementInputError` for inputs that do not fit.
+
+    A coarse scale whose elements hold fewer than :data:`MIN_POINTS_PER_ELEMENT` points
+    (median) is left out with a warning (the reference's ``settings.scales`` are those kept).
+    """
     check_inputs(mesh, images, cameras)
     check_scales(images, settings.scales)
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
@@ -142,9 +151,19 @@ def displacement_reference(mesh: SurfaceMesh, images: Sequence[Image], cameras: 
     for scale in settings.scales:
         scaled = [c.scaled(scale) for c in cameras]
         quad = pixel_quadrature(mesh, scaled, settings.points_per_px)
+        per_element = float(np.median(np.bincount(quad.element, minlength=quad.n_elements)))
+        if per_element < MIN_POINTS_PER_ELEMENT and scale != settings.scales[-1]:
+            logger.warning("displacement scale %d left out: its elements hold %.0f pixels "
+                           "(median), fewer than %d (elements of %.2g px at this scale; coarsest "
+                           "useful scale: fewer [displacement] scales)", scale, per_element,
+                           MIN_POINTS_PER_ELEMENT, np.sqrt(per_element))
+            continue
         normalisation = settings.normalisation if settings.jacobian == "reference" else None
         views.append(reference_view(quad, mesh.nodes, [p[scale] for p in pyramids], scaled, scale,
                                     normalisation=normalisation))
+    kept = tuple(v.scale for v in views)
+    if kept != tuple(settings.scales):
+        settings = dataclasses.replace(settings, scales=kept)
     return DisplacementReference(mesh=mesh, cameras=tuple(cameras), images=tuple(images),
                                  views=tuple(views), settings=settings)
 
@@ -211,10 +230,7 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
                               lambda H, b, U: solver.solve(H, b, U, scale),
                               lambda res: chi_square(res, quad), tol_mm, max_iter, max_damping,
                               residual_rtol, on_step, f"displacement GN scale {scale}")
-    blocks = None
-    if not frozen and out.residual.dr_du is not None:     # the local checks' block of H
-        w = np.where(out.residual.mask, quad.weight_mm2, 0.0)
-        blocks = node_blocks(Support(quad), out.residual.dr_du * w[:, :, None], w)
+    blocks = None if frozen else residual_blocks(quad, out.residual)  # (the local checks')
     return DisplacementGNResult(U=out.q.reshape(-1, 3),
                                 residual=dataclasses.replace(out.residual, dr_du=None),
                                 iterations=out.iterations, converged=out.converged,
@@ -252,17 +268,14 @@ class DisplacementMeasurement:
     @property
     def valid(self) -> np.ndarray:
         """(n,) bool: the node passed its local checks (all True without them)."""
-        if self.validity is None:
-            return np.ones(len(self.nodes), dtype=bool)
-        return self.validity.valid
+        return np.ones(len(self.nodes), bool) if self.validity is None else self.validity.valid
 
     @property
     def residual_to_noise(self) -> np.ndarray:
         """(n,) the residual over each node's support against its local noise floor (NaN
         without the local checks, or for a node no point sees)."""
-        if self.validity is None:
-            return np.full(len(self.nodes), np.nan)
-        return self.validity.residual_to_noise
+        v = self.validity
+        return np.full(len(self.nodes), np.nan) if v is None else v.residual_to_noise
 
     @property
     def ok(self) -> bool:
@@ -303,9 +316,9 @@ def displacement_verdict(residual_percent: float, noise_percent: float, U: np.nd
                          finest: ScaleReport, settings: DisplacementSettings,
                          validity: NodeValidity | None = None) -> str | None:
     """Why a displacement cannot be trusted, or None: no texture in a deformed image, a
-    diverged field, then :func:`driver.judge` (residual against the noise floor, stagnation),
-    then the local checks (``validity``: more than ``settings.max_invalid_share`` of the
-    nodes invalid, the worst named)."""
+    diverged field (``U``: the Gauss-Newton's change from its start), then :func:`driver.judge`
+    (residual against the noise floor, stagnation), then the local checks (``validity``: more
+    than ``settings.max_invalid_share`` of the nodes invalid, the worst named)."""
     for ratio, source in zip(texture_ratios, sources):
         if not ratio >= MIN_TEXTURE_RATIO:
             return (f"{source}: no texture to correlate over the specimen (contrast over noise "
@@ -390,7 +403,9 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                                      gn.blocks)
     logger.info("displacement: %d of %d nodes valid locally", int(validity.valid.sum()),
                 validity.valid.size)
-    failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U,
+    # the divergence is the Gauss-Newton's own excursion: a large motion's start is none
+    start = 0.0 if U0 is None else np.asarray(U0, float).reshape(n, 3)
+    failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U - start,
                                    reference.mesh.nodes, ratios, [im.source for im in images],
                                    reports[-1], settings, validity)
     if failure is not None:

@@ -29,7 +29,7 @@ from fesdic_core.residual.validity import (LocalImage, NodeValidity, Support, bl
                                            local_image, local_noise_gray, neighbour_ratio,
                                            node_neighbours, node_validity)
 
-__all__ = ["node_blocks", "hessian_blocks", "displacement_validity"]
+__all__ = ["node_blocks", "residual_blocks", "hessian_blocks", "displacement_validity"]
 
 
 def node_blocks(support: Support, weighted_dr_du: np.ndarray, weights: np.ndarray
@@ -42,6 +42,15 @@ def node_blocks(support: Support, weighted_dr_du: np.ndarray, weights: np.ndarra
         inv_w = np.where(weights > 0, 1.0 / np.where(weights > 0, weights, 1.0), 0.0)
     P = np.einsum("cgk,cgl,cg->gkl", wG, wG, inv_w).reshape(-1, 9)
     return support.total(P).reshape(-1, 3, 3)
+
+
+def residual_blocks(quad, residual: DisplacementResidual) -> np.ndarray | None:
+    """(n, 3, 3) the nodes' diagonal blocks of ``H`` from a residual's own derivative
+    (:func:`node_blocks`; None for a residual without it)."""
+    if residual.dr_du is None:
+        return None
+    w = np.where(residual.mask, quad.weight_mm2, 0.0)
+    return node_blocks(Support(quad), residual.dr_du * w[:, :, None], w)
 
 
 def hessian_blocks(H: sps.spmatrix) -> np.ndarray:
@@ -103,7 +112,7 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
         if view.hessian is not None:
             blocks = hessian_blocks(view.hessian)
         else:
-            blocks = node_blocks(support, res.dr_du * w[:, :, None], w)
+            blocks = residual_blocks(quad, res)
     conditioning = block_conditioning(blocks, support.total(quad.weight_mm2))
     std = _predicted_std(blocks, sigma_r, mean_weight)
     neighbours = node_neighbours([g.connectivity for g in quad.groups], quad.n_nodes)

@@ -88,8 +88,10 @@ MIN_NODE_CONDITIONING = 0.02
 MAX_NEIGHBOUR_RATIO = 3.0
 #: the share of invalid nodes above which a measurement fails. Measured: the converged fields
 #: (coarse FE, the spline levels) have 0-0.4 % invalid nodes; plain FE diverging locally
-#: 2.2 % (a 4 mm mesh, 5 nodes 10 mm off, all flagged), 4.4 % and 12 % (1 mm and 2 mm Q9 meshes,
-#: 1.5 % and 4 % of their nodes bad); a mesh over the background 27 %
+#: 2.2 % (a 2 mm mesh, 5 nodes 10 mm off, all flagged), 4.4 % and 12 % (1 mm Q4 and 2 mm Q9
+#: meshes, 1.5 % and 4 % of their nodes bad); a mesh over the background 27 % (measured before
+#: the displacement's prefilter of 1 px and its coarse scales' pixel count: the 1 mm mesh then
+#: has 3.2 % and fails on its stagnation, the 2 mm meshes no longer diverge)
 DEFAULT_MAX_INVALID_SHARE = 0.03
 
 

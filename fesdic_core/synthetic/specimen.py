@@ -13,10 +13,12 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["Specimen", "twisted_plate", "flat_plate", "HeightFunction", "GradientFunction"]
+__all__ = ["Specimen", "twisted_plate", "flat_plate", "cylindrical_panel", "HeightFunction",
+           "GradientFunction", "MaterialFunction"]
 
 HeightFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
 GradientFunction = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+MaterialFunction = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def _flat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -33,7 +35,9 @@ class Specimen:
 
     x runs along ``length_mm``, y along ``width_mm``; the actual surface is
     ``z = height(x, y)``; an optional central through hole shows the background.
-    ``texture`` (x, y) -> gray, if given, replaces the seeded speckle.
+    ``texture`` (x, y) -> gray, if given, replaces the seeded speckle. ``material`` (x, y) ->
+    bool, if given, is the plate's outline inside its ``length_mm x width_mm`` rectangle
+    (True where there is material): any outline and cut-outs, beside the central hole.
     """
 
     length_mm: float
@@ -44,6 +48,7 @@ class Specimen:
     speckle_mm: float = 0.3
     seed: int = 0
     texture: HeightFunction | None = field(default=None, compare=False)
+    material: MaterialFunction | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("length_mm", "width_mm", "speckle_mm"):
@@ -63,6 +68,8 @@ class Specimen:
         inside = (np.abs(x) <= 0.5 * self.length_mm) & (np.abs(y) <= 0.5 * self.width_mm)
         if self.hole_radius_mm is not None:
             inside &= x * x + y * y >= self.hole_radius_mm**2
+        if self.material is not None:
+            inside &= np.asarray(self.material(x, y), bool)
         return inside
 
 
@@ -123,3 +130,24 @@ def twisted_plate(
 def flat_plate(length_mm: float, width_mm: float, hole_radius_mm: float | None = None, **kwargs) -> Specimen:
     """Flat plate ``z = 0`` (see :class:`Specimen` for the keyword arguments)."""
     return Specimen(length_mm=length_mm, width_mm=width_mm, hole_radius_mm=hole_radius_mm, **kwargs)
+
+
+def _cylinder_height(x, y, radius_mm):
+    return np.sqrt(radius_mm ** 2 - x * x) - radius_mm + 0.0 * y
+
+
+def _cylinder_gradient(x, y, radius_mm):
+    return -x / np.sqrt(radius_mm ** 2 - x * x), 0.0 * x * y
+
+
+def cylindrical_panel(length_mm: float, width_mm: float, radius_mm: float, **kwargs) -> Specimen:
+    """Cylindrical panel ``z = sqrt(R^2 - x^2) - R``: its axis along y, its crown at the origin
+    towards the cameras (``z <= 0`` elsewhere), ``R = radius_mm > length_mm / 2``; keyword
+    arguments as :class:`Specimen` (``material`` for an outline, ``hole_radius_mm``, ...)."""
+    if not radius_mm > 0.5 * length_mm:
+        raise ValueError(f"cylindrical_panel: radius_mm must exceed length_mm / 2 = "
+                         f"{0.5 * length_mm:g}, got {radius_mm!r}")
+    return Specimen(length_mm=length_mm, width_mm=width_mm,
+                    height=partial(_cylinder_height, radius_mm=float(radius_mm)),
+                    height_gradient=partial(_cylinder_gradient, radius_mm=float(radius_mm)),
+                    **kwargs)

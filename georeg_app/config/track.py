@@ -20,8 +20,15 @@ A complete example (optional keys show their default in parentheses)::
     [displacement]                # optional section
     method = "fe"                 # "fe" | "tikhonov" | "georeg"          (default "fe")
     scales = 3                    # image scales, coarse to fine           (default 3)
-    incremental = true            # start each frame from the last good one's field; the
-                                  # reference stays frame 0               (default true)
+    incremental = true            # chain the frames: the last good one's field is a
+                                  # candidate start; the reference stays frame 0 (default true)
+    start = "features"            # each frame's starting field: "features": SIFT matches
+                                  # of each camera's reference and deformed images,
+                                  # triangulated and fitted on the mesh (large motions; with
+                                  # incremental = true the better, by the residual at the
+                                  # coarsest scale, of that and the last good frame's field);
+                                  # "previous": the last good frame's field (zero without
+                                  # incremental); "zero"                  (default "features")
     tikhonov_length_mm = 10.0     # method = "tikhonov": length (mm) on each component (10)
     levels = 2                    # method = "georeg": spline levels per component (2)
     jacobian = "reference"        # "reference": modified Gauss-Newton, H of the reference
@@ -59,10 +66,12 @@ from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boole
                                            load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
-           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY",
+           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "START_MODES", "REFERENCE_SUMMARY",
            "series_table", "displacement_table", "reference_table"]
 
 DISPLACEMENT_METHODS = ("fe", "tikhonov", "georeg")
+#: the starting field of each frame (``[displacement] start``)
+START_MODES = ("features", "previous", "zero")
 DEFAULT_TRACK_DIR = "track_out"
 REFERENCE_SUMMARY = "summary.json"
 
@@ -86,6 +95,7 @@ class DisplacementConfig:
     tikhonov_length_mm: float = 10.0
     levels: int = 2
     jacobian: str = "reference"
+    start: str = "features"
     max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
     @property
@@ -173,6 +183,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
                                   default=d.tikhonov_length_mm),
         levels=t.take("levels", integer, "an integer", default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
+        start=t.take("start", string, "a string", default=d.start),
         max_invalid_share=t.take("max_invalid_share", number, "a number (a share, 0 to 1)",
                                  default=d.max_invalid_share))
     t.finish()
@@ -183,6 +194,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "levels", c.levels, c.levels >= 1, ">= 1")
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))
+    check(t, "start", c.start, c.start in START_MODES,
+          "one of " + ", ".join(map(json.dumps, START_MODES)))
     check(t, "max_invalid_share", c.max_invalid_share, 0.0 <= c.max_invalid_share <= 1.0,
           "a share in [0, 1]")
     return c

