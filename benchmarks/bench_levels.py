@@ -157,6 +157,9 @@ def riley_surface(specimen, element_mm: float = 0.5):
         fe = nominal_model(plate_with_hole(specimen.length_mm, specimen.width_mm,
                                            specimen.hole_radius_mm), 7, "Q9").mesh
         coords, connect = fe.nodes.copy(), fe.blocks[0].connectivity
+    if specimen.material is not None:     # an outline of any shape: the elements on material
+        corners = coords[connect]
+        connect = connect[specimen.contains(corners[..., 0], corners[..., 1]).all(axis=1)]
     coords[:, 2] = specimen.height(coords[:, 0], coords[:, 1])
     family = family_from_meshio("quad9")
     xi, _ = gauss_rule(family, 3)

@@ -22,8 +22,8 @@ from fesdic_core.cameras.rig import stereo_transform
 logger = logging.getLogger(__name__)
 
 __all__ = ["StereoPoints", "normalised_points", "epipolar_distance_px", "triangulate",
-           "Features", "detect_features", "match_descriptors", "match_features", "stereo_points",
-           "DEFAULT_MAX_EPIPOLAR_PX", "RATIO_TEST"]
+           "Features", "detect_features", "match_descriptors", "depth_per_px", "match_features",
+           "stereo_points", "DEFAULT_MAX_EPIPOLAR_PX", "RATIO_TEST"]
 
 #: matches farther than this from their epipolar line (px, in camera 1) are outliers
 DEFAULT_MAX_EPIPOLAR_PX = 1.0
@@ -253,3 +253,21 @@ def stereo_points(cam0: Camera, cam1: Camera, values0: np.ndarray, values1: np.n
                 n_features, n, int(keep.sum()), max_epipolar_px,
                 float(np.median(d[keep])) if keep.any() else float("nan"), len(idx))
     return StereoPoints(px0[idx], px1[idx], xyz[front], d[idx], err[front], n)
+
+
+def depth_per_px(cam0: Camera, cam1: Camera, px0: np.ndarray, px1: np.ndarray) -> np.ndarray:
+    """How far (n,) mm each triangulated match ``px0``, ``px1`` (n, 2) moves when its
+    camera-1 pixel moves by 1 px along its epipolar line (the triangulation's sensitivity
+    to a matching error: a match's error of ``e`` px moves the point about ``e`` times this).
+
+    The epipolar direction at ``px1`` is the image in camera 1 of camera 0's ray through
+    ``px0`` (two points on the ray, 1 mm apart, projected)."""
+    if len(px0) == 0:
+        return np.zeros(0)
+    xyz, _ = triangulate(cam0, cam1, px0, px1)
+    ray = xyz - cam0.center
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    direction = cam1.project(xyz + ray) - cam1.project(xyz)
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    moved, _ = triangulate(cam0, cam1, px0, np.asarray(px1, dtype=np.float64) + direction)
+    return np.linalg.norm(moved - xyz, axis=1)

@@ -64,11 +64,16 @@ logger = logging.getLogger(__name__)
 #: scale "converges" in 0 iterations at 0 %), and an element of a few pixels holds no texture
 MIN_POINTS_PER_ELEMENT = 16
 
+#: the Gaussian prefilter (px) of a series' images: 1 px reads sub-pixel motions of an aliased
+#: speckle within 1 %, the shape's 0.5 px 1.4-3 % low (interpolation bias;
+#: benchmarks/bench_subpixel.py, tests/fesdic_core/displacement/test_subpixel.py)
+DISPLACEMENT_PREFILTER_PX = 1.0
+
 #: the Jacobian of the displacement's Gauss-Newton: the reference images' (modified
 #: Gauss-Newton, H once per scale) or the deformed images' at the current state (full)
 JACOBIANS = ("reference", "current")
 
-__all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
+__all__ = ["JACOBIANS", "DISPLACEMENT_PREFILTER_PX", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference", "DisplacementMeasurement",
            "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
            "measure_displacement", "displacement_verdict"]
 

@@ -5,6 +5,7 @@ from georeg_app.config.measure import (METHOD_NAMES, AUTO, integer_or_auto, leng
                                        DEFAULT_OUTPUT_DIR, ImagesConfig, Landmark, CAMERA_SOURCES,
                                        CamerasConfig, GeometryConfig, MethodConfig, OutputConfig,
                                        Config, load_config)
+from georeg_app.config.cad import AUTO_POSE, RoughPose, take_cad, cad_file
 from georeg_app.config.roi import ROI_SURFACES, RoiConfig, take_roi
 from georeg_app.config.toml_schema import (ConfigError, ConfigFileNotFoundError, Table, load_toml,
                                            show, show_key, show_path, integer, count, number,
@@ -24,4 +25,4 @@ __all__ = ["METHOD_NAMES", "AUTO", "integer_or_auto", "lengths_or_auto", "GEOMET
            "array", "numbers", "pair", "check", "resolve_path", "existing_file", "SeriesConfig",
            "DisplacementConfig", "ReferenceConfig", "TrackConfig", "load_track_config",
            "natural_key", "DISPLACEMENT_METHODS", "REFERENCE_SUMMARY", "ROI_SURFACES", "RoiConfig",
-           "take_roi"]
+           "take_roi", "AUTO_POSE", "RoughPose", "take_cad", "cad_file"]

@@ -19,7 +19,8 @@ A complete example (every key; optional keys show their default in parentheses):
     # opencv = "stereo.yml"       # OpenCV FileStorage (.yml/.xml/.json): K1 D1 K2 D2 R T
     # vic3d = "project.z3d"       # VIC-3D project (.z3d zip or its project.xml)
     # dice = "cal.xml"            # DICe camera-system XML
-                                  # all but `file`: >= 4 landmarks pose the specimen (not "roi"):
+                                  # all but `file`: >= 4 landmarks pose the specimen (not
+                                  # kind "roi", nor "cad" with a pose):
     # [[landmarks]]               # one table per landmark (also accepted: [[cameras.landmarks]])
     # xyz_mm = [-50.0, -25.0, 0.0]   # world point on the specimen (mm)
     # cam0_px = [812.3, 1040.8]      # where camera 0 sees it (x = column, y = row, px)
@@ -35,6 +36,10 @@ A complete example (every key; optional keys show their default in parentheses):
                                   # untrimmed B-spline faces, entity 128) or, with the
                                   # optional 'cad' extra, STEP (.step, .stp) or trimmed IGES
     # faces = [0, "lid"]          # kind = "cad" only: faces by index or name (default all)
+    # pose = "auto"               # "cad" without landmarks: ICP of the rig's triangulated
+                                  # matches onto the faces, from their principal axes, or
+    # pose = {rotation_deg = [180, 0, 0], translation_mm = [0, 0, 400]}   # from a rough
+                                  # pose X_cam0 = R X_cad + t (R: rotation vector, deg)
     # polygon_px = [[420, 310], [1500, 300], [1510, 900]]   # kind = "roi": the specimen on
                                   # camera 0's image, [x, y] px (x = column), no landmarks
     # exclude_px = [[[900, 500], [1000, 500], [1000, 600]]]   # "roi": holes (default none)
@@ -90,6 +95,7 @@ from fesdic_core.imaging.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDER
 from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.residual.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG
 
+from georeg_app.config.cad import RoughPose, cad_file, take_cad
 from georeg_app.config.roi import RoiConfig, take_roi
 from georeg_app.config.toml_schema import (ConfigError, ConfigFileNotFoundError, Table, boolean,
                                            check, existing_file, integer, load_toml, number,
@@ -101,7 +107,8 @@ __all__ = ["METHOD_NAMES", "AUTO", "integer_or_auto", "lengths_or_auto", "GEOMET
            "NORMALISATIONS", "DEFAULT_TIKHONOV_LENGTHS_MM", "DEFAULT_OUTPUT_DIR",
            "ImagesConfig", "Landmark", "CAMERA_SOURCES", "CamerasConfig", "GeometryConfig",
            "MethodConfig", "OutputConfig", "Config", "load_config",
-           "ConfigError", "ConfigFileNotFoundError", "images_table", "cameras_table", "geometry_table", "method_table", "output_table"]
+           "ConfigError", "ConfigFileNotFoundError", "images_table", "cameras_table",
+           "geometry_table", "method_table", "output_table", "placed"]
 
 METHOD_NAMES = ("fe", "tikhonov", "georeg")
 #: the value of ``levels`` and of a Tikhonov length chosen from the data
@@ -176,6 +183,7 @@ class GeometryConfig:
     exclude_px: tuple | None = None
     mask: Path | None = None
     surface: str | None = None        # kind = "roi": "plane" (its default) or "quadric"
+    pose: str | RoughPose | None = None   # kind = "cad": "auto" or a rough pose (no landmarks)
 
     @property
     def roi(self) -> RoiConfig | None:  # the region of interest of kind = "roi" (arrays)
@@ -256,9 +264,10 @@ def _landmarks(data: Any, where: str, source: Path) -> tuple[Landmark, ...]:
 
 
 def cameras_table(data: Any, top_landmarks: Any, source: Path, base: Path,
-                  roi: bool = False) -> CamerasConfig:
+                  roi: bool = False, pose: bool = False) -> CamerasConfig:
     """The ``[cameras]`` table (and the top-level ``[[landmarks]]``), checked: one calibration
-    source (``roi``: for ``[geometry] kind = "roi"``, no landmarks)."""
+    source (``roi``: for ``[geometry] kind = "roi"``, ``pose``: for a CAD part with a
+    ``pose``; no landmarks for either)."""
     t = Table(data, "[cameras]", source)
     paths = {key: t.take(key, string, "a file path (string)") for key in CAMERA_SOURCES}
     nested = t.take("landmarks", lambda v: v, "an array of tables")
@@ -272,12 +281,14 @@ def cameras_table(data: Any, top_landmarks: Any, source: Path, base: Path,
     raw = nested if nested is not None else top_landmarks
     where = "[[cameras.landmarks]]" if nested is not None else "[[landmarks]]"
     landmarks = _landmarks(raw, where, source) if raw is not None else ()
-    if roi and landmarks:
-        raise t.error("landmarks", 'not used with [geometry] kind = "roi" (the rig\'s '
-                                   "triangulation places the specimen); remove them")
-    if given[0] != "file" and len(landmarks) < 4 and not roi:
-        raise t.error(given[0], f"needs at least 4 [[landmarks]] to place the specimen, "
-                                f"got {len(landmarks)}")
+    if (roi or pose) and landmarks:
+        used = 'kind = "roi"' if roi else "pose"
+        raise t.error("landmarks", f"not used with [geometry] {used} (the rig's triangulation "
+                                   "places the specimen); remove them")
+    if given[0] != "file" and len(landmarks) < 4 and not (roi or pose):
+        raise t.error(given[0], f"needs at least 4 [[landmarks]] to place the specimen, got "
+                                f'{len(landmarks)} (or [geometry] kind = "roi", or kind = "cad" '
+                                'with pose = "auto" or a rough pose)')
     return CamerasConfig(landmarks=landmarks,
                          **{key: existing_file(t, key, value, base) for key, value in paths.items()})
 
@@ -300,11 +311,9 @@ def geometry_table(data: Any, source: Path, base: Path) -> GeometryConfig:
               "hole_radius_mm": t.take("hole_radius_mm", number, "a number (mm)"),
               "file": t.take("file", string, "a file path (string)")}
     elements = t.take("elements", integer, "an integer")
-    faces = t.take("faces", _face_list, "a list of face indices (integers) or names (strings)")
+    cad = take_cad(t, kind)
     roi = take_roi(t, kind, base)
     t.finish()
-    if faces is not None and kind != "cad":
-        raise t.error("faces", f"not used with kind = {json.dumps(kind)}; remove it")
     for key in sorted(_GEOMETRY_KEYS[kind] - given):
         raise t.error(key, f"missing required key (for kind = {json.dumps(kind)})")
     for key in sorted((given & set(values)) - _GEOMETRY_KEYS[kind]):
@@ -315,27 +324,9 @@ def geometry_table(data: Any, source: Path, base: Path) -> GeometryConfig:
     check(t, "hole_radius_mm", radius, radius is not None and width is not None
            and 0 < radius < 0.5 * width, f"> 0 and < width_mm / 2 = {0.5 * (width or 0):g}")
     check(t, "elements", elements, elements is not None and elements >= 1, ">= 1")
-    if kind == "cad":
-        from georeg_app.inputs.cad import cad_faces, check_cad_file
-        try:
-            check_cad_file(Path(values["file"]))  # STEP: named before looking for the file
-        except ValueError as err:
-            raise t.error("file", str(err)) from None
-    path = existing_file(t, "file", values["file"], base)
-    if kind == "cad":
-        for key, selection in (("file", None), ("faces", faces)):
-            try:
-                cad_faces(path, selection)        # the file reads, the faces exist
-            except ValueError as err:
-                raise t.error(key, str(err)) from None
-    return GeometryConfig(kind, length, width, radius, path, elements, faces, **roi)
-
-
-def _face_list(value: Any) -> tuple:
-    if not isinstance(value, list) or not value or not all(
-            isinstance(v, str) or (isinstance(v, int) and not isinstance(v, bool)) for v in value):
-        raise TypeError(value)
-    return tuple(value)
+    path = (cad_file(t, values["file"], base, cad["faces"]) if kind == "cad"
+            else existing_file(t, "file", values["file"], base))
+    return GeometryConfig(kind, length, width, radius, path, elements, **cad, **roi)
 
 
 def method_table(data: Any, source: Path) -> MethodConfig:
@@ -380,6 +371,13 @@ def method_table(data: Any, source: Path) -> MethodConfig:
     return m
 
 
+def placed(geometry: Any) -> dict:
+    """The keyword arguments ``roi`` and ``pose`` of :func:`cameras_table` for the raw
+    ``[geometry]`` table: does it place the specimen without landmarks?"""
+    kind = geometry.get("kind") if isinstance(geometry, dict) else None
+    return {"roi": kind == "roi", "pose": kind == "cad" and geometry.get("pose") is not None}
+
+
 def output_table(data: Any, source: Path, base: Path) -> OutputConfig:
     """The ``[output]`` table, checked (``dir`` relative to ``base``)."""
     t = Table(data, "[output]", source)
@@ -410,8 +408,7 @@ def load_config(path: str | os.PathLike) -> Config:
     output = top.take("output", lambda v: v, "a table", default={})
     top.finish()
     config = Config(images=images_table(images, source, base),
-                    cameras=cameras_table(cameras, landmarks, source, base,
-                                          roi=isinstance(geometry, dict) and geometry.get("kind") == "roi"),
+                    cameras=cameras_table(cameras, landmarks, source, base, **placed(geometry)),
                     geometry=geometry_table(geometry, source, base),
                     method=method_table(method, source),
                     output=output_table(output, source, base),

@@ -35,13 +35,19 @@ A complete example (optional keys show their default in parentheses)::
                                   # images built and factorized once per scale for every
                                   # iteration and frame; "current": full Gauss-Newton, H
                                   # rebuilt at each iteration      (default "reference")
+    prefilter_px = 1.0            # image model of the frames and of the reference pair for
+                                  # the displacement: Gaussian prefilter sigma (px); the
+                                  # reference shape keeps [method] prefilter_px. 1 px reads
+                                  # sub-pixel motions within 1 % where 0.5 px reads them 1.4-3 %
+                                  # low (benchmarks/bench_subpixel.py)        (default 1.0)
     max_invalid_share = 0.03      # a frame fails when more of its nodes than this share are
                                   # not valid locally (residual over the local noise,
                                   # texture, conditioning, neighbours)      (default 0.03)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
-                                  # and <method>_spline.json for method = "georeg")
+                                  # and <method>_spline.json for method = "georeg"; a CAD
+                                  # part's: nominal_spline.json, the VTU's face parameters)
 
     [output]
     dir = "track_out"             # (default "track_out"; `--out` overrides)
@@ -57,23 +63,27 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fesdic_core.displacement.driver import JACOBIANS
+from fesdic_core.displacement.driver import DISPLACEMENT_PREFILTER_PX, JACOBIANS
 from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
-                                       OutputConfig, cameras_table, geometry_table, images_table, method_table)
+                                       OutputConfig, cameras_table, geometry_table, images_table,
+                                       method_table, placed)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                                            load_toml, number, resolve_path, show, show_path, string)
 
 __all__ = ["SeriesConfig", "DisplacementConfig", "ReferenceConfig", "TrackConfig",
-           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "START_MODES", "REFERENCE_SUMMARY",
-           "series_table", "displacement_table", "reference_table"]
+           "load_track_config", "natural_key", "DISPLACEMENT_METHODS", "START_MODES",
+           "REFERENCE_SUMMARY", "REFERENCE_NOMINAL", "series_table", "displacement_table",
+           "reference_table"]
 
 DISPLACEMENT_METHODS = ("fe", "tikhonov", "georeg")
 #: the starting field of each frame (``[displacement] start``)
 START_MODES = ("features", "previous", "zero")
 DEFAULT_TRACK_DIR = "track_out"
 REFERENCE_SUMMARY = "summary.json"
+#: a CAD part's nominal faces in a `georeg measure` folder (georeg_app.shape.outputs.NOMINAL_FILE)
+REFERENCE_NOMINAL = "nominal_spline.json"
 
 
 @dataclass(frozen=True)
@@ -96,6 +106,7 @@ class DisplacementConfig:
     levels: int = 2
     jacobian: str = "reference"
     start: str = "features"
+    prefilter_px: float = DISPLACEMENT_PREFILTER_PX
     max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
     @property
@@ -105,13 +116,15 @@ class DisplacementConfig:
 
 @dataclass(frozen=True)
 class ReferenceConfig:
-    """A `georeg measure` output folder and the files of its (first trusted) method."""
+    """A `georeg measure` output folder and the files of its (first trusted) method;
+    ``nominal``: a CAD part's nominal faces (:data:`REFERENCE_NOMINAL`), None for one patch."""
 
     dir: Path
     mesh: Path
     cameras: Path
     spline: Path | None
     label: str
+    nominal: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -184,6 +197,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
         levels=t.take("levels", integer, "an integer", default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
         start=t.take("start", string, "a string", default=d.start),
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
         max_invalid_share=t.take("max_invalid_share", number, "a number (a share, 0 to 1)",
                                  default=d.max_invalid_share))
     t.finish()
@@ -194,6 +208,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "levels", c.levels, c.levels >= 1, ">= 1")
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))
+    check(t, "prefilter_px", c.prefilter_px, c.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "start", c.start, c.start in START_MODES,
           "one of " + ", ".join(map(json.dumps, START_MODES)))
     check(t, "max_invalid_share", c.max_invalid_share, 0.0 <= c.max_invalid_share <= 1.0,
@@ -230,8 +245,10 @@ def reference_table(data: Any, source: Path, base: Path, method: str) -> Referen
                   "with [method] name = \"georeg\")" if what == "spline" else ""
             raise t.error("dir", f"{show_path(folder)} lacks {path.name}{why}",
                           ConfigFileNotFoundError)
+    nominal = folder / REFERENCE_NOMINAL
     return ReferenceConfig(dir=folder, mesh=files["mesh"], cameras=files["cameras"],
-                           spline=files.get("spline"), label=str(entry.get("label", stem)))
+                           spline=files.get("spline"), label=str(entry.get("label", stem)),
+                           nominal=nominal if nominal.is_file() else None)
 
 
 def load_track_config(path: str | os.PathLike) -> TrackConfig:
@@ -256,8 +273,7 @@ def load_track_config(path: str | os.PathLike) -> TrackConfig:
             if value is None:
                 raise top.error(key, "missing required section (or give [reference] dir = a "
                                      "`georeg measure` output folder)")
-        roi = isinstance(geometry, dict) and geometry.get("kind") == "roi"
-        cams = cameras_table(cameras, landmarks, source, base, roi=roi)
+        cams = cameras_table(cameras, landmarks, source, base, **placed(geometry))
         geom, ref = geometry_table(geometry, source, base), None
     else:
         for key, value in (("cameras", cameras), ("geometry", geometry), ("landmarks", landmarks)):

@@ -2,7 +2,8 @@
 
 Each kind of ``[geometry]`` has its own small module: the plates (:mod:`~georeg_app.inputs.plate`),
 a legacy mesh (:mod:`~georeg_app.inputs.mesh_file`), a CAD part
-(:mod:`~georeg_app.inputs.cad`) and a region of interest of camera 0's image triangulated by
+(:mod:`~georeg_app.inputs.cad`; with a ``pose``, placed by the rig's triangulation through
+:mod:`~georeg_app.inputs.cad_pose`) and a region of interest of camera 0's image triangulated by
 the rig (:mod:`~georeg_app.inputs.roi`, through :func:`specimen_setup`: it needs the images
 and the cameras, which it expresses in the specimen's frame). Each gives the nominal spline(s) and the analysis-suitable
 FE mesh (Eq. 17) that the plugin's levels and the core's measurement share.
@@ -17,6 +18,7 @@ from fesdic_core.imaging.image import Image
 
 from georeg_app.config.measure import GeometryConfig
 from georeg_app.inputs.cad import cad_faces, cad_model, cad_refinements
+from georeg_app.inputs.cad_pose import CadPose, place_part
 from georeg_app.inputs.mesh_file import mesh_model
 from georeg_app.errors import InputError
 from georeg_app.inputs.plate import coarse_patch
@@ -57,14 +59,22 @@ def build_model(geometry: GeometryConfig, levels: int) -> NominalModel:
 
 
 def specimen_setup(geometry: GeometryConfig, levels: int, cameras: Sequence[Camera],
-                   images: Sequence[Image]) -> tuple[NominalModel, list, RoiSpecimen | None]:
+                   images: Sequence[Image]
+                   ) -> tuple[NominalModel, list, RoiSpecimen | CadPose | None]:
     """The nominal model and the cameras a run measures with, for every geometry kind.
 
-    Returns ``(model, cameras, roi)``: for ``kind = "roi"`` the cameras are expressed in the
-    specimen frame and ``roi`` says how it was placed (:class:`~georeg_app.inputs.roi.RoiSpecimen`);
-    for the other kinds the cameras are returned as given and ``roi`` is None.
+    Returns ``(model, cameras, placed)``: for ``kind = "roi"`` the cameras are expressed in
+    the specimen frame and ``placed`` says how it was placed
+    (:class:`~georeg_app.inputs.roi.RoiSpecimen`); for ``kind = "cad"`` with a ``pose``, in
+    the CAD's frame, ``placed`` the ICP's pose (:class:`~georeg_app.inputs.cad_pose.CadPose`);
+    for the other kinds the cameras are returned as given and ``placed`` is None. Either
+    record has a ``summary()`` for the outputs.
     """
     if geometry.kind == "roi":
         roi = roi_specimen(geometry, cameras, images, levels)
         return roi.model, list(roi.cameras), roi
-    return build_model(geometry, levels), list(cameras), None
+    model = build_model(geometry, levels)
+    if geometry.kind == "cad" and geometry.pose is not None:
+        pose = place_part(geometry, cameras, images)
+        return model, list(pose.cameras), pose
+    return model, list(cameras), None

@@ -36,6 +36,9 @@ def _toml_value(value: Any) -> str:
         v = float(value)
         return repr(v) if math.isfinite(v) else ("nan" if math.isnan(v) else
                                                   ("inf" if v > 0 else "-inf"))
+    if dataclasses.is_dataclass(value):          # an inline table (a CAD part's rough pose)
+        return "{" + ", ".join(f"{f.name} = {_toml_value(getattr(value, f.name))}"
+                               for f in dataclasses.fields(value)) + "}"
     if isinstance(value, np.ndarray):
         value = value.tolist()
     if isinstance(value, (list, tuple)):

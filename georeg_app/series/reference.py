@@ -2,7 +2,9 @@
 
 The reference is frame 0: the measured surface and calibrated cameras of the reference pair
 (``[images]``), either measured here first (as ``georeg measure`` does) or read from a
-``georeg measure`` output folder (``[reference]``). The reference state (images,
+``georeg measure`` output folder (``[reference]``: a plate, a mesh, a region of interest, or a
+CAD part of several faces, rebuilt from its nominal faces and its nodes' face parameters).
+The reference state (images,
 quadratures, cameras, operators) is built once (:class:`SeriesReference`) and, with Dask
 (:mod:`georeg_app.series.dask`), shipped once to every worker.
 """
@@ -14,6 +16,7 @@ import logging
 from pathlib import Path
 
 import cv2
+import meshio
 import numpy as np
 
 from adapters.fesdic_core import NominalModel, displacement_space
@@ -26,14 +29,12 @@ from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.fe.mesh_io import read_mesh
 from fesdic_core.imaging.image import Image, read_image
 from fesdic_core.solve.solvers import CachedFactorization, DirectSolver
-from georeg_plugin.io.spline_io import read_spline_json
+from georeg_plugin.io.spline_io import read_part_json, read_spline_json
 from georeg_plugin.levels.solver import GeometricRegularization
 
 from georeg_app.config.measure import Config, OutputConfig
-from georeg_app.config.track import TrackConfig
+from georeg_app.config.track import REFERENCE_NOMINAL, TrackConfig
 from georeg_app.errors import InputError, MeasurementFailed
-from georeg_app.inputs.cameras import load_cameras
-from georeg_app.inputs.nominal import specimen_setup
 from georeg_app.shape.methods import measure_specs
 from georeg_app.shape.pipeline import run_methods
 
@@ -63,8 +64,10 @@ class SeriesReference:
     features: FeatureReference | None = None
 
 
-def _reference_images(config: TrackConfig) -> tuple[Image, Image]:
-    prefilter, order = config.method.prefilter_px, config.method.interpolation_order
+def _reference_images(config: TrackConfig, prefilter_px: float | None = None) -> tuple[Image, Image]:
+    """The reference pair with the shape's image model, or with ``prefilter_px``."""
+    prefilter = config.method.prefilter_px if prefilter_px is None else prefilter_px
+    order = config.method.interpolation_order
     return tuple(read_image(p, prefilter_px=prefilter, order=order) for p in (config.images.cam0,
                                                                                config.images.cam1))
 
@@ -79,17 +82,19 @@ def load_reference(config: TrackConfig, progress=False
         mesh = read_mesh(ref.mesh)
         cameras = tuple(read_cameras_json(ref.cameras))
         model = None
-        if ref.spline is not None:
+        if ref.nominal is not None:                  # a CAD part: its faces, as measured
+            model = _part_model(ref.nominal, ref.mesh, mesh)
+        elif ref.spline is not None:
             try:
                 doc = json.loads(Path(ref.spline).read_text(encoding="utf-8"))
             except (json.JSONDecodeError, UnicodeDecodeError) as err:
                 raise InputError(f"{ref.spline}: not valid JSON ({err})") from None
             if isinstance(doc, dict) and "faces" in doc:
-                raise InputError(f"{ref.spline}: the reference is a part of several faces, which "
-                                 "a [reference] folder does not rebuild (its nodes' face "
-                                 "parameters are not saved); give the part's [geometry] "
-                                 '(kind = "cad") and its [cameras] instead, without [reference], '
-                                 "to measure the reference shape in the run")
+                raise InputError(f"{ref.spline}: the reference is a part of several faces but "
+                                 f"its folder lacks {REFERENCE_NOMINAL} (written by `georeg "
+                                 "measure` since this release, with the nodes' face parameters "
+                                 "in the VTU): measure the reference again, or give the part's "
+                                 '[geometry] (kind = "cad") and its [cameras] without [reference]')
             model = NominalModel(patch=read_spline_json(ref.spline), mesh=mesh, uv=None)
         return mesh, cameras, images, model, f"{ref.dir} ({ref.label})"
     shape_config = Config(images=config.images, cameras=config.cameras, geometry=config.geometry,
@@ -104,10 +109,33 @@ def load_reference(config: TrackConfig, progress=False
                                 f"({result.spec.label}): {result.failure}")
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
-    nominal, _, _ = specimen_setup(config.geometry, config.method.fixed_levels,   # as measured
-                                   load_cameras(config.cameras, images), images)
-    model = dataclasses.replace(nominal, mesh=mesh)        # a part keeps its faces
+    model = dataclasses.replace(result.nominal, mesh=mesh)  # as measured; a part keeps its faces
     return mesh, tuple(m.cameras), images, model, f"measured here ({result.spec.label})"
+
+
+def _part_model(nominal: Path, vtu: Path, mesh: SurfaceMesh) -> NominalModel:
+    """A CAD part of a `georeg measure` folder: its nominal faces (``nominal``, the coarsest
+    splines) and, from the VTU ``vtu`` (``mesh`` as read), the measured nodes with their face
+    and parameters on it (point data ``node_face``, ``face_uv``) and each element's face."""
+    try:
+        faces = read_part_json(nominal)
+        names = [f.get("name") for f in json.loads(Path(nominal).read_text("utf-8"))["faces"]]
+        raw = meshio.read(vtu)
+        node_face = np.asarray(raw.point_data["node_face"]).astype(int).ravel()
+        uv = np.asarray(raw.point_data["face_uv"], dtype=float).reshape(-1, 2)
+        element_face = np.concatenate([np.asarray(d).ravel() for d in raw.cell_data["face"]])
+    except KeyError as err:
+        raise InputError(f"{vtu}: lacks the part's {err} data (measured by an older georeg? "
+                         "measure the reference again)") from None
+    except (ValueError, OSError) as err:
+        raise InputError(f"{nominal}: {err}") from None
+    if len(node_face) != mesh.n_nodes or node_face.max(initial=-1) >= len(faces):
+        raise InputError(f"{vtu}: its node_face ({len(node_face)} nodes, faces up to "
+                         f"{node_face.max(initial=-1)}) does not match its mesh ({mesh.n_nodes} "
+                         f"nodes) and {nominal} ({len(faces)} faces)")
+    return NominalModel(patch=faces[0], mesh=mesh, uv=uv, faces=tuple(faces),
+                        node_face=node_face, element_face=element_face.astype(int),
+                        face_names=tuple(names))
 
 
 def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | None = None,
@@ -148,13 +176,15 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
                                     normalisation=config.method.normalisation,
                                     jacobian=d.jacobian,
                                     max_invalid_share=d.max_invalid_share)
+    if d.prefilter_px != config.method.prefilter_px:     # the frames' image model
+        images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)
     solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
     features = feature_reference(reference) if d.start == "features" else None
     return SeriesReference(displacement=reference, solver=solver,
-                           prefilter_px=config.method.prefilter_px, label=label,
+                           prefilter_px=d.prefilter_px, label=label,
                            interpolation_order=config.method.interpolation_order,
                            element_face=None if model is None else model.element_face,
                            start=d.start, features=features)

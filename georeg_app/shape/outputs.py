@@ -17,7 +17,7 @@ Files of a run (:func:`write_all`): ``summary.json`` (schema of :func:`summary_d
 one ``<label>.vtu`` per method, ``<label>_spline.json`` and ``<label>_spline.igs`` for
 each georeg method, ``convergence.csv``, the PNG figures and ``report.html``; the calibrated
 rig of each method as ``<label>_cameras.json`` (the core's JSON) and ``<label>_cameras.yml``
-(OpenCV FileStorage: K1 D1 K2 D2, the stereo R T, each camera's rvec tvec).
+(OpenCV FileStorage: K1 D1 K2 D2, the stereo R T, each camera's rvec tvec); a part's faces.
 """
 from __future__ import annotations
 
@@ -40,12 +40,13 @@ from georeg_app.config.measure import AUTO
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["SUMMARY_FILE", "CONVERGENCE_FILE", "REPORT_FILE", "CONVERGENCE_COLUMNS",
-           "write_json_atomic", "OutputWriter", "safe_stem", "method_stems", "summary_dict",
-           "seen_fraction", "write_method_vtu", "convergence_rows", "write_convergence_csv",
-           "write_spline_outputs", "write_all"]
+__all__ = ["SUMMARY_FILE", "NOMINAL_FILE", "CONVERGENCE_FILE", "REPORT_FILE",
+           "CONVERGENCE_COLUMNS", "write_json_atomic", "OutputWriter", "safe_stem", "method_stems",
+           "summary_dict", "seen_fraction", "write_method_vtu", "convergence_rows",
+           "write_convergence_csv", "write_spline_outputs", "write_all"]
 
 SUMMARY_FILE = "summary.json"
+NOMINAL_FILE = "nominal_spline.json"        # a CAD part's nominal faces (coarsest splines)
 CONVERGENCE_FILE = "convergence.csv"
 REPORT_FILE = "report.html"
 CONVERGENCE_COLUMNS = ("method", "scale", "fixed_point", "stage", "iteration", "residual_percent",
@@ -306,7 +307,8 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     each element's integration points at the finest scale that entered the residual: seen
     by both cameras, not hidden, not grazing, not in the edge margin; 0 where the shape is
     only carried by the regularization) and, for a part of several faces, ``face`` (each
-    element's face index)."""
+    element's face index), the point data ``node_face``, ``face_uv`` (each node's face and
+    parameters: with :data:`NOMINAL_FILE`, the part)."""
     from fesdic_core.fe.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
@@ -326,6 +328,10 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     face = getattr(result, "element_face", None)               # a part of several faces
     if face is not None:
         cell_data["face"] = np.asarray(face, dtype=np.int32)
+    nominal = getattr(result, "nominal", None)
+    if nominal is not None and nominal.is_part:
+        point_data["node_face"] = np.asarray(nominal.node_face, dtype=np.int32)
+        point_data["face_uv"] = np.asarray(nominal.uv, dtype=float)
     write_mesh(path, mesh, point_data=point_data, cell_data=cell_data)
     return Path(path)
 
@@ -394,6 +400,7 @@ def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None 
     """
     from fesdic_core.cameras.io.formats import write_opencv_stereo
     from fesdic_core.cameras.rig import write_cameras_json
+    from georeg_plugin.io.spline_io import write_part_json
 
     from georeg_app.report.figures import make_figures
     from georeg_app.report.html import report_html
@@ -412,6 +419,9 @@ def write_all(out_dir: str | os.PathLike, run, figures: dict[str, bytes] | None 
             if len(rig) == 2:                                  # (none for a failed method)
                 write_cameras_json(w.path(f"{stem}_cameras.json"), rig)
                 write_opencv_stereo(w.path(f"{stem}_cameras.yml"), rig)
+        part = [r.nominal for r in run.results if getattr(r, "nominal", None) is not None]
+        if part and part[0].is_part:                           # the part's coarsest faces
+            write_part_json(w.path(NOMINAL_FILE), part[0].faces, part[0].face_names)
         write_convergence_csv(w.path(CONVERGENCE_FILE), run)
         for name, png in figures.items():
             w.write_bytes(f"{name}.png", png)

@@ -59,7 +59,9 @@ class MethodResult:
     (one per face), ``element_face`` each element's face, ``face_names`` their names.
     ``dropped_dofs``: georeg's spline levels solved at, level -> the counts of
     :class:`~georeg_plugin.levels.support.LevelSupport` (dofs outside the mesh's outline or
-    seen by no integration point, removed; slivers)."""
+    seen by no integration point, removed; slivers). ``nominal``: the nominal model measured
+    (a part's faces and its nodes' face parameters go to the outputs: a folder that
+    ``georeg track`` takes as ``[reference]``)."""
 
     spec: MethodSpec
     measurement: Measurement | None
@@ -77,6 +79,7 @@ class MethodResult:
     element_face: np.ndarray | None = None
     face_names: tuple = ()
     dropped_dofs: dict | None = None
+    nominal: NominalModel | None = None
 
     @property
     def ok(self) -> bool:
@@ -87,7 +90,9 @@ class MethodResult:
 class RunResult:
     """All methods of a run, with what produced them (config, input checksums, version);
     ``specimen``: for ``[geometry] kind = "roi"``, the specimen frame in the calibration's
-    frame and the surface fit (:meth:`georeg_app.inputs.roi.RoiSpecimen.summary`)."""
+    frame and the surface fit (:meth:`georeg_app.inputs.roi.RoiSpecimen.summary`); for a CAD
+    part with a ``pose``, the pose the ICP found
+    (:meth:`georeg_app.inputs.cad_pose.CadPose.summary`)."""
 
     results: tuple
     truth_available: bool
@@ -97,7 +102,7 @@ class RunResult:
     inputs: tuple = ()
     version: str = "unknown"
     started: str = ""
-    specimen: dict | None = None      # kind = "roi": the specimen frame and the surface fit
+    specimen: dict | None = None      # kind "roi": the frame and the fit; "cad" + pose: the pose
 
 
 # ----------------------------------------------------------------------------- methods
@@ -222,7 +227,8 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
         logger.info("%s failed: %s", spec.label, err)
         return MethodResult(spec=spec, measurement=None, mesh=model.mesh, distance_to_bfp_mm=None,
                             shape_rms_error_mm=None, status="failed",
-                            failure=" ".join(str(err).split()) or type(err).__name__)
+                            failure=" ".join(str(err).split()) or type(err).__name__,
+                            nominal=model)
     errors = rms = None
     if truth is not None:
         errors = shape_error_to_surface(m.nodes, truth.specimen)
@@ -245,7 +251,7 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
                         regularization={"tikhonov_length_mm": {int(k): float(v) for k, v in
                                                                chosen.items()}} if chosen else None,
                         element_face=model.element_face, face_names=model.face_names,
-                        dropped_dofs=dropped)
+                        dropped_dofs=dropped, nominal=model)
 
 
 def run_methods(config: Config, specs: Sequence[MethodSpec], *, images=None,

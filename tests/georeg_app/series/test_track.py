@@ -181,17 +181,44 @@ def _measure_reference(folder, shape, geometry: str):
     return shape
 
 
-def test_a_part_s_measure_folder_as_reference_is_refused_naming_the_way(series, tmp_path, capsys):
-    """A `georeg measure` folder of a CAD part cannot be rebuilt as a part (no face
-    parameters saved): refused naming its spline file and the configuration that works."""
+def test_a_part_s_measure_folder_is_a_reference(series, tmp_path):
+    """Issue 27, item 3: the `georeg measure` folder of a CAD part of two faces (its nominal
+    faces and its nodes' face parameters saved beside the VTU) is the [reference] of `georeg
+    track`: the georeg displacement on the part's glued component levels, the faces kept."""
+    from georeg_app.config.track import REFERENCE_NOMINAL
+    from georeg_app.shape.outputs import NOMINAL_FILE
     folder, _ = series
     _write_halves(folder)
     shape = _measure_reference(folder, tmp_path / "shape",
                                'kind = "cad"\nfile = "halves.igs"\nelements = 32')
+    assert REFERENCE_NOMINAL == NOMINAL_FILE and (shape / NOMINAL_FILE).is_file()
+    config = _config(folder, series_keys='cam0 = ["frames/f1_cam0.png"]\ncam1 = ["frames/f1_cam1.png"]',
+                     extra=f'[reference]\ndir = "{shape}"', displacement='method = "georeg"\nlevels = 2')
+    out = tmp_path / "out"
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    frame = summary["frames"][0]
+    assert frame["status"] == "ok", frame["failure"]
+    assert str(shape) in summary["reference"]
+    vtu = meshio.read(out / frame["mesh_file"])
+    rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - MOTIONS[0](vtu.points)) ** 2, axis=0))
+    assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+    assert np.bincount(np.concatenate(vtu.cell_data["face"])).tolist() == [16, 16]
+
+
+def test_a_part_s_folder_without_its_nominal_faces_is_refused_naming_the_way(series, tmp_path,
+                                                                            capsys):
+    """A part's folder written before the nominal faces were saved: refused naming the file
+    it lacks and the configuration that works."""
+    from georeg_app.shape.outputs import NOMINAL_FILE
+    folder, _ = series
+    _write_halves(folder)
+    shape = _measure_reference(folder, tmp_path / "shape",
+                               'kind = "cad"\nfile = "halves.igs"\nelements = 32')
+    (shape / NOMINAL_FILE).unlink()
     config = _config(folder, extra=f'[reference]\ndir = "{shape}"',
                      displacement='method = "georeg"\nlevels = 1')
-    _fails_naming(capsys, config, tmp_path / "out", "_spline.json", "part of several faces",
-                  'kind = "cad"')
+    _fails_naming(capsys, config, tmp_path / "out", "_spline.json", NOMINAL_FILE, 'kind = "cad"')
 
 
 def _fails_naming(capsys, config, out, *names):
