@@ -26,10 +26,8 @@ change of each camera's projection derivative, all small where DIC works).
 
 A displacement is trusted only if, at the finest scale, the residual is consistent with the
 images' noise, the deformed images show texture, the field stayed bounded and the
-Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`), and
-if no more than ``max_invalid_share`` of its nodes fail their local checks (residual over
-the local noise, texture, conditioning, consistency with the neighbours:
-:mod:`fesdic_core.displacement.validity`).
+Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`), and if
+at most ``max_invalid_share`` of its nodes fail their local checks (:mod:`fesdic_core.displacement.validity`).
 """
 from __future__ import annotations
 
@@ -94,9 +92,8 @@ class DisplacementSettings:
         serves every iteration of every frame; "current": the full Gauss-Newton, the
         deformed images' Jacobian at the current state, ``H`` rebuilt at every iteration.
         Both minimise the same residual (same solution); only the convergence path differs.
-    max_invalid_share : the measurement fails when more than this share of its nodes fail
-        their local checks (:mod:`fesdic_core.displacement.validity`; the default
-        :data:`~fesdic_core.residual.validity.DEFAULT_MAX_INVALID_SHARE` is measured there).
+    max_invalid_share : fail when more than this share of the seen nodes fail their local checks
+        (:mod:`fesdic_core.displacement.validity`; default measured in :mod:`~fesdic_core.residual.validity`).
     """
 
     scales: tuple[int, ...] = (0,)
@@ -117,8 +114,7 @@ class DisplacementSettings:
         if self.jacobian not in JACOBIANS:
             raise ValueError(f"jacobian must be one of {JACOBIANS}, got {self.jacobian!r}")
         if isinstance(self.max_invalid_share, str) or not 0.0 <= self.max_invalid_share <= 1.0:
-            raise ValueError(f"max_invalid_share must be a share in [0, 1], got "
-                             f"{self.max_invalid_share!r}")
+            raise ValueError(f"max_invalid_share must be a share in [0, 1], got {self.max_invalid_share!r}")
 
 
 @dataclass(frozen=True, eq=False)

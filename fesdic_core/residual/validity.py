@@ -112,6 +112,16 @@ class NodeValidity:
     seen: np.ndarray
     residual_limit: float = MAX_RESIDUAL_TO_NOISE
 
+    def point_data(self) -> dict:
+        """The VTU point data of the checks: ``valid`` (n,) uint8 0/1, ``residual_to_noise``."""
+        return {"valid": self.valid.astype(np.uint8),
+                "residual_to_noise": np.asarray(self.residual_to_noise, float)}
+
+    def counts(self) -> dict:
+        """``{"n_valid", "valid_share"}`` of a summary (the share of all nodes)."""
+        n = int(np.count_nonzero(self.valid))
+        return {"n_valid": n, "valid_share": n / self.valid.size if self.valid.size else None}
+
     @property
     def invalid_share(self) -> float:
         """Share of the nodes the images see that are not valid (0 if none is seen). A node

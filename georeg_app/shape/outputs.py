@@ -227,13 +227,12 @@ def summary_dict(run) -> dict:
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
     "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
     "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
-    "levels_chosen", "regularization", "dropped_dofs", "n_valid", "valid_share"}]}``, plus ``"specimen"`` (the frame and
-    surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs`` (georeg):
-    per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
-    "slivers"}`` (the dofs outside the mesh's outline or seen by no point), else null. ``n_valid``,
-    ``valid_share``: the nodes valid locally (:mod:`fesdic_core.shape.validity`). ``status`` is "ok" or
+    "levels_chosen", "regularization", "dropped_dofs", "n_valid", "valid_share"}]}``, plus
+    ``"specimen"`` (the frame and surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs``
+    (georeg): per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
+    "slivers"}`` (the dofs outside the mesh's outline or seen by no point), else null. ``status`` is "ok" or
     "failed" (``failure`` says why); a method that failed without any state has null
-    measurement fields and no mesh file.
+    measurement fields and no mesh file. ``n_valid``, ``valid_share``: the nodes valid locally.
     """
     methods = []
     for result, stem in zip(run.results, method_stems(run)):
@@ -254,8 +253,7 @@ def summary_dict(run) -> dict:
             "shape_bias_median_mm": None, "shape_bias_max_mm": None, "noise_variance": None,
             "levels_chosen": _levels_chosen(result),
             "regularization": getattr(result, "regularization", None),
-            "dropped_dofs": getattr(result, "dropped_dofs", None),
-            "n_valid": None, "valid_share": None,
+            "dropped_dofs": getattr(result, "dropped_dofs", None), "n_valid": None, "valid_share": None,
         }
         if m is not None:
             noise = getattr(m, "noise_percent", float("nan"))
@@ -274,11 +272,8 @@ def summary_dict(run) -> dict:
                                    "shape_converged": r.shape_converged,
                                    "fixed_point_converged": r.fixed_point_converged}
                                   for r in getattr(m, "scales", ())],
-                **_uncertainty_entry(m),
+                **_uncertainty_entry(m), **(getattr(m, "validity", None) and m.validity.counts() or {}),
             })
-            if getattr(m, "validity", None) is not None:
-                entry.update(n_valid=int(m.validity.valid.sum()),
-                             valid_share=_number(np.mean(m.validity.valid)))
         methods.append(entry)
     failed = [e["label"] for e in methods if e["status"] != "ok"]
     doc = {"truth_available": bool(run.truth_available), "failed_methods": failed,
@@ -302,8 +297,7 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
     ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
     known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
-    ``shape_bias_mm`` (the bias indicator), ``valid`` (0/1) and ``residual_to_noise`` (the node's
-    local checks, :mod:`fesdic_core.shape.validity`); the cell data ``seen_fraction`` (the share of
+    ``shape_bias_mm`` (the bias indicator), ``valid``, ``residual_to_noise``; the cell data ``seen_fraction`` (the share of
     each element's integration points at the finest scale that entered the residual: seen
     by both cameras, not hidden, not grazing, not in the edge margin; 0 where the shape is
     only carried by the regularization) and, for a part of several faces, ``face`` (each
@@ -312,7 +306,7 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     from fesdic_core.fe.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
-    point_data = {"shape_correction_mm": np.asarray(m.q, float),
+    point_data = {"shape_correction_mm": np.asarray(m.q, float), **(getattr(m, "validity", None) and m.validity.point_data() or {}),
                   "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)}
     errors = getattr(result, "shape_error_mm", None)
     if errors is not None:
@@ -320,10 +314,6 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     for name in ("shape_std_mm", "shape_bias_mm"):
         if getattr(m, name, None) is not None:
             point_data[name] = np.asarray(getattr(m, name), float)
-    validity = getattr(m, "validity", None)
-    if validity is not None:
-        point_data["valid"] = np.asarray(validity.valid, np.uint8)
-        point_data["residual_to_noise"] = np.asarray(validity.residual_to_noise, float)
     cell_data = {"seen_fraction": seen_fraction(m, mesh.n_elements)}
     face = getattr(result, "element_face", None)               # a part of several faces
     if face is not None:

@@ -63,7 +63,8 @@ def test_the_frame_vtu_and_summary_carry_the_nodes_validity(series, tmp_path):
 def test_nodes_over_the_background_fail_the_frame_which_is_still_written(series, tmp_path):
     """The reference folder's mesh replaced by one 68 mm long: its 14 end nodes (beyond the
     plate) are invalid in the failed frame's VTU, which is written, and the summary's mean
-    displacement counts only the valid nodes."""
+    displacement counts only the valid nodes. (With the displacement's 1 px prefilter the
+    frame fails on its Gauss-Newton, which does not stagnate, before its invalid share.)"""
     folder, _ = series
     long = tmp_path / "long"
     long.mkdir()
@@ -76,9 +77,8 @@ def test_nodes_over_the_background_fail_the_frame_which_is_still_written(series,
     mesh = rectangle_mesh(68.0, 30.0, 17, 6, family="Q4")
     write_mesh(long / "shape_out" / "fe.vtu", mesh)
     status, summary, frame = _track(long, tmp_path / "out")
-    assert status == 1 and frame["status"] == "failed"
-    assert "not valid locally" in frame["failure"]
-    assert frame["mesh_file"].endswith("_failed.vtu")
+    assert status == 1 and frame["status"] == "failed"     # (on its invalid share, or on the
+    assert frame["mesh_file"].endswith("_failed.vtu")      # background's drag: no stagnation)
     data = meshio.read(tmp_path / "out" / frame["mesh_file"]).point_data
     beyond = np.abs(mesh.nodes[:, 0]) > 30.0
     assert beyond.sum() == 14 and not np.any(data["valid"][beyond])
