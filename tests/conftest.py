@@ -60,3 +60,9 @@ def dot_target_views():
     (target_views.py)."""
     import target_views
     return target_views.render_views()
+
+
+@pytest.fixture(scope="session")
+def twist_wave_pair():
+    """The displacement tests' flat plate, then the same paint twisted and wavy (scenes.py)."""
+    return scenes.twist_wave_pair()

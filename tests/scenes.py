@@ -185,3 +185,52 @@ def cad_scene(part: str) -> Scene:
                         speckle_mm=speckle_mm_for(cameras[0], 4.0), seed=9)
     arrays = render_stereo(specimen, cameras, supersample=3, noise_std=2.0, seed=12, progress=False)
     return Scene(specimen, tuple(cameras), tuple(arrays))
+
+
+#: the displacement tests' plate and rig (tests/fesdic_core/displacement/test_displacement.py:
+#: 60 x 40 mm, 320 x 240 px over 72 mm, 4 px speckle, 2 gray levels of noise), then the same
+#: paint on the plate twisted by 1 mm at its corners and wavy (0.2 mm), rendered independently
+#: (benchmarks/bench_validity.py's ``twist`` pair)
+TWIST_WAVE = dict(image_size=(320, 240), field_mm=72.0, plate_mm=(60.0, 40.0), corner_mm=1.0,
+                  waviness_mm=0.2, noise_std=2.0, seed=3)
+
+
+class TwistPair:
+    """A flat plate, then the same paint twisted and wavy (:data:`TWIST_WAVE`); each pair is
+    rendered on first use (about 2 s each)."""
+
+    def __init__(self):
+        from fesdic_core.synthetic.motion import HeightMotion
+        from fesdic_core.synthetic.specimen import flat_plate
+        d = TWIST_WAVE
+        self.cameras = tuple(demo_cameras(image_size=d["image_size"], field_mm=d["field_mm"]))
+        speckle = speckle_mm_for(self.cameras[0], 4.0)
+        self.flat = flat_plate(*d["plate_mm"], speckle_mm=speckle, seed=d["seed"])
+        self.twisted = twisted_plate(*d["plate_mm"], corner_mm=d["corner_mm"],
+                                     waviness_mm=d["waviness_mm"], speckle_mm=speckle,
+                                     seed=d["seed"])
+        self.motion = HeightMotion(self.twisted.height)    # u (n, 3) of the reference points
+
+    def _pair(self, specimen, seed, tag, motion=None):
+        arrays = render_stereo(specimen, self.cameras, supersample=3,
+                               noise_std=TWIST_WAVE["noise_std"], seed=seed, progress=False,
+                               motion=motion)
+        return tuple(Image.from_array(a, source=f"{tag} cam{k}") for k, a in enumerate(arrays))
+
+    @functools.cached_property
+    def reference(self) -> tuple:
+        """The flat plate's pair."""
+        return self._pair(self.flat, 1, "flat")
+
+    @functools.cached_property
+    def deformed(self) -> tuple:
+        """The twisted and wavy plate's pair."""
+        return self._pair(self.twisted, 2, "twisted")
+
+    def moved(self, motion, seed: int = 3) -> tuple:
+        """The flat plate's pair under another ``motion`` (rendered at each call)."""
+        return self._pair(self.flat, seed, "moved", motion)
+
+
+def twist_wave_pair() -> TwistPair:
+    return TwistPair()

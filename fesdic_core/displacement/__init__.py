@@ -16,6 +16,8 @@ from fesdic_core.displacement.start import (StartSettings, FeatureReference, Sta
                                             start_residual_percent, coarse_noise_percent,
                                             image_shift_px)
 from fesdic_core.displacement.strain import tangent_frame, surface_green_lagrange, RECOVERIES
+from fesdic_core.displacement.validity import (node_blocks, residual_blocks, hessian_blocks,
+                                               displacement_validity)
 
 __all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference",
            "DisplacementMeasurement", "DisplacementGNResult", "displacement_reference",
@@ -24,4 +26,6 @@ __all__ = ["JACOBIANS", "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "Displ
            "displacement_operators", "displacement_rhs", "component_dofs", "componentwise",
            "ComponentTikhonovSolver", "StartSettings", "FeatureReference", "StartReport",
            "FeatureStart", "FieldFit", "feature_reference", "feature_start", "fit_field",
-           "start_residual_percent", "coarse_noise_percent", "image_shift_px", "tangent_frame", "surface_green_lagrange", "RECOVERIES"]
+           "start_residual_percent", "coarse_noise_percent", "image_shift_px", "tangent_frame",
+           "surface_green_lagrange", "RECOVERIES", "node_blocks", "residual_blocks", "hessian_blocks",
+           "displacement_validity"]

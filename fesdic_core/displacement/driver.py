@@ -26,7 +26,8 @@ change of each camera's projection derivative, all small where DIC works).
 
 A displacement is trusted only if, at the finest scale, the residual is consistent with the
 images' noise, the deformed images show texture, the field stayed bounded and the
-Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`).
+Gauss-Newton stagnated (:func:`displacement_verdict`, built on :func:`driver.judge`), and if
+at most ``max_invalid_share`` of its nodes fail their local checks (:mod:`fesdic_core.displacement.validity`).
 """
 from __future__ import annotations
 
@@ -42,10 +43,12 @@ from fesdic_core.checks import MeasurementInputError, check_inputs, check_scales
 from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
                                                displacement_operators, displacement_residual,
                                                displacement_rhs, reference_view)
+from fesdic_core.displacement.validity import displacement_validity, residual_blocks
 from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.fe.quadrature import pixel_quadrature
 from fesdic_core.imaging.image import Image, pyramid
 from fesdic_core.imaging.noise import CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, residual_noise_floor
+from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE, NodeValidity
 from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import MeasurementSettings, ScaleReport
 from fesdic_core.shape.verdict import judge
@@ -89,6 +92,8 @@ class DisplacementSettings:
         serves every iteration of every frame; "current": the full Gauss-Newton, the
         deformed images' Jacobian at the current state, ``H`` rebuilt at every iteration.
         Both minimise the same residual (same solution); only the convergence path differs.
+    max_invalid_share : fail when more than this share of the seen nodes fail their local checks
+        (:mod:`fesdic_core.displacement.validity`; default measured in :mod:`~fesdic_core.residual.validity`).
     """
 
     scales: tuple[int, ...] = (0,)
@@ -101,12 +106,15 @@ class DisplacementSettings:
     consistency_factor: float = CONSISTENCY_FACTOR
     max_shape_fraction: float = 0.25
     jacobian: str = "reference"
+    max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
     def __post_init__(self):
         # the shape's checks of the scales and the normalisation (ValueError naming them)
         MeasurementSettings(scales=self.scales, normalisation=self.normalisation)
         if self.jacobian not in JACOBIANS:
             raise ValueError(f"jacobian must be one of {JACOBIANS}, got {self.jacobian!r}")
+        if isinstance(self.max_invalid_share, str) or not 0.0 <= self.max_invalid_share <= 1.0:
+            raise ValueError(f"max_invalid_share must be a share in [0, 1], got {self.max_invalid_share!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,6 +179,7 @@ class DisplacementGNResult:
     converged: bool
     damping: float = 0.0
     stop: str = ""
+    blocks: np.ndarray | None = field(default=None, repr=False)   # (n, 3, 3) of the final H
 
 
 def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequence,
@@ -222,10 +231,11 @@ def displacement_gauss_newton(U0: np.ndarray, ref: ReferenceView, images: Sequen
                               lambda H, b, U: solver.solve(H, b, U, scale),
                               lambda res: chi_square(res, quad), tol_mm, max_iter, max_damping,
                               residual_rtol, on_step, f"displacement GN scale {scale}")
+    blocks = None if frozen else residual_blocks(quad, out.residual)  # (the local checks')
     return DisplacementGNResult(U=out.q.reshape(-1, 3),
                                 residual=dataclasses.replace(out.residual, dr_du=None),
                                 iterations=out.iterations, converged=out.converged,
-                                damping=out.damping, stop=out.stop)
+                                damping=out.damping, stop=out.stop, blocks=blocks)
 
 
 @dataclass(frozen=True)
@@ -234,6 +244,9 @@ class DisplacementMeasurement:
 
     ``failure``: None for a trusted field, else one line saying what failed and by how much.
     ``converged``: no failure and every scale stagnated. ``U`` (n, 3) node-major.
+    ``validity``: the local checks of every node at the finest scale
+    (:func:`~fesdic_core.displacement.validity.displacement_validity`), whose :attr:`valid`
+    and :attr:`residual_to_noise` are the measurement's.
     """
 
     U: np.ndarray
@@ -247,10 +260,23 @@ class DisplacementMeasurement:
     noise_percent: float = float("nan")
     failure: str | None = None
     scales: tuple = ()
+    validity: NodeValidity | None = field(default=None, repr=False)
 
     @property
     def residual_percent(self) -> float:
         return self.residual.std_percent
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(n,) bool: the node passed its local checks (all True without them)."""
+        return np.ones(len(self.nodes), bool) if self.validity is None else self.validity.valid
+
+    @property
+    def residual_to_noise(self) -> np.ndarray:
+        """(n,) the residual over each node's support against its local noise floor (NaN
+        without the local checks, or for a node no point sees)."""
+        v = self.validity
+        return np.full(len(self.nodes), np.nan) if v is None else v.residual_to_noise
 
     @property
     def ok(self) -> bool:
@@ -271,24 +297,29 @@ class DisplacementMeasurement:
 def _noise_floor(ref: ReferenceView, res: DisplacementResidual, images: Sequence):
     """Per camera, the residual the two images' noise explains (percent of the reference
     range; :func:`residual_noise_floor` of the pair (reference, deformed) of one camera),
-    pooled over the cameras as the residual is; and the deformed images' texture ratios."""
-    percents, counts, ratios = [], [], []
+    pooled over the cameras as the residual is; the deformed images' texture ratios; and each
+    camera's contrast ratio (reference over deformed, over the region)."""
+    percents, counts, ratios, contrast = [], [], [], []
     for c in range(2):
         floor = residual_noise_floor(ref.X, res.mask[c], [ref.images[c], images[c]],
                                      [ref.cameras[c], ref.cameras[c]])
         percents.append(floor.percent)
         counts.append(np.count_nonzero(res.mask[c]))
         ratios.append(floor.texture_ratio()[1])
+        contrast.append(floor.contrast[0] / floor.contrast[1] if floor.contrast[1] > 0 else 1.0)
     n = sum(counts)
     pooled = float(np.sqrt(np.dot(counts, np.square(percents)) / n)) if n else float("nan")
-    return pooled, ratios
+    return pooled, ratios, contrast
 
 
 def displacement_verdict(residual_percent: float, noise_percent: float, U: np.ndarray,
                          nodes: np.ndarray, texture_ratios: Sequence[float], sources: Sequence[str],
-                         finest: ScaleReport, settings: DisplacementSettings) -> str | None:
+                         finest: ScaleReport, settings: DisplacementSettings,
+                         validity: NodeValidity | None = None) -> str | None:
     """Why a displacement cannot be trusted, or None: no texture in a deformed image, a
-    diverged field (``U``: the Gauss-Newton's change from its start), then :func:`driver.judge` (residual against the noise floor, stagnation)."""
+    diverged field (``U``: the Gauss-Newton's change from its start), then :func:`driver.judge`
+    (residual against the noise floor, stagnation), then the local checks (``validity``: more
+    than ``settings.max_invalid_share`` of the nodes invalid, the worst named)."""
     for ratio, source in zip(texture_ratios, sources):
         if not ratio >= MIN_TEXTURE_RATIO:
             return (f"{source}: no texture to correlate over the specimen (contrast over noise "
@@ -299,7 +330,10 @@ def displacement_verdict(residual_percent: float, noise_percent: float, U: np.nd
     if not np.isfinite(largest) or largest > settings.max_shape_fraction * size:
         return (f"the displacement diverged: {largest:.3g} mm at a node, more than "
                 f"{settings.max_shape_fraction:g} of the surface's size ({size:.3g} mm)")
-    return judge(residual_percent, noise_percent, np.zeros(len(nodes)), nodes, finest, settings)
+    failure = judge(residual_percent, noise_percent, np.zeros(len(nodes)), nodes, finest, settings)
+    if failure is None and validity is not None:
+        failure = validity.failure(nodes, settings.max_invalid_share)
+    return failure
 
 
 def _check_frame(images: Sequence[Image], reference: DisplacementReference) -> None:
@@ -341,6 +375,7 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     pyramids = [pyramid(im, max(settings.scales) + 1) for im in images]
     log, t0 = GaussNewtonLog(), time.perf_counter()
     reports, total_iterations, gn, noise_percent, ratios = [], 0, None, float("nan"), [np.inf] * 2
+    contrast = [1.0, 1.0]
     for k, scale in enumerate(settings.scales, start=1):
         view, imgs = reference.view(scale), [p[scale] for p in pyramids]
         if isinstance(solver, StartScaleHook):       # (not a CachedFactorization)
@@ -352,7 +387,7 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                                        residual_rtol=None if finest else settings.residual_rtol,
                                        log=log, jacobian=settings.jacobian)
         U, total_iterations = gn.U, total_iterations + gn.iterations
-        noise_percent, ratios = _noise_floor(view, gn.residual, imgs)
+        noise_percent, ratios, contrast = _noise_floor(view, gn.residual, imgs)
         report = ScaleReport(scale=scale, residual_percent=gn.residual.std_percent,
                              noise_percent=noise_percent, fixed_point_iterations=1,
                              shape_converged=gn.converged, fixed_point_converged=True,
@@ -365,11 +400,15 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
             progress(k, len(settings.scales), report)
     if gn is None:                      # (DisplacementSettings refuses an empty schedule)
         raise ValueError("measure_displacement: no image scale to measure at")
+    validity = displacement_validity(view, gn.residual, U, reference.mesh.nodes, imgs, contrast,
+                                     gn.blocks)
+    logger.info("displacement: %d of %d nodes valid locally", int(validity.valid.sum()),
+                validity.valid.size)
     # the divergence is the Gauss-Newton's own excursion: a large motion's start is none
     start = 0.0 if U0 is None else np.asarray(U0, float).reshape(n, 3)
     failure = displacement_verdict(reports[-1].residual_percent, noise_percent, U - start,
                                    reference.mesh.nodes, ratios, [im.source for im in images],
-                                   reports[-1], settings)
+                                   reports[-1], settings, validity)
     if failure is not None:
         logger.info("displacement failed: %s", failure)
     return DisplacementMeasurement(U=U, nodes=reference.mesh.nodes, residual=gn.residual,
@@ -378,4 +417,4 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                                    time_s=time.perf_counter() - t0,
                                    converged=failure is None and all(r.converged for r in reports),
                                    noise_percent=noise_percent, failure=failure,
-                                   scales=tuple(reports))
+                                   scales=tuple(reports), validity=validity)

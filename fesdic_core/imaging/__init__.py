@@ -4,9 +4,9 @@ from fesdic_core.imaging.image import (Image, ImageError, read_image, pyramid, C
                                        DEFAULT_PREFILTER_PX, check_prefilter, ORDERS, DEFAULT_ORDER,
                                        check_order, COMPILED_KERNEL5)
 from fesdic_core.imaging.noise import (CONSISTENCY_FACTOR, MIN_TEXTURE_RATIO, NoiseFloor,
-                                       immerkaer_sigma, residual_noise_floor)
+                                       immerkaer_sigma, immerkaer_response, residual_noise_floor)
 
 __all__ = ["Image", "ImageError", "read_image", "pyramid", "COMPILED_KERNEL",
            "DEFAULT_PREFILTER_PX", "check_prefilter", "ORDERS", "DEFAULT_ORDER", "check_order",
            "COMPILED_KERNEL5", "CONSISTENCY_FACTOR", "MIN_TEXTURE_RATIO", "NoiseFloor",
-           "immerkaer_sigma", "residual_noise_floor"]
+           "immerkaer_sigma", "immerkaer_response", "residual_noise_floor"]

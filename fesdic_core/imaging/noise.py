@@ -37,7 +37,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-__all__ = ["CONSISTENCY_FACTOR", "MIN_TEXTURE_RATIO", "NoiseFloor", "immerkaer_sigma", "residual_noise_floor"]
+__all__ = ["CONSISTENCY_FACTOR", "MIN_TEXTURE_RATIO", "NoiseFloor", "immerkaer_sigma",
+           "immerkaer_response", "residual_noise_floor"]
 
 #: a residual more than this many times the noise floor is not explained by the images
 CONSISTENCY_FACTOR = 3.0
@@ -46,6 +47,21 @@ CONSISTENCY_FACTOR = 3.0
 MIN_TEXTURE_RATIO = 2.0
 
 _IMMERKAER = np.array([[1.0, -2.0, 1.0], [-2.0, 4.0, -2.0], [1.0, -2.0, 1.0]])
+
+
+def immerkaer_response(values: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Immerkaer's noise estimate at each pixel nearest to ``xy`` (m, 2) (x = column):
+    ``sqrt(pi / 2) |N * f| / 6`` (m,) gray levels, whose mean over a region is
+    :func:`immerkaer_sigma` there; its mean over a node's support is that node's local noise
+    (:mod:`fesdic_core.residual.validity`)."""
+    values = np.asarray(values, dtype=np.float64)
+    h, w = values.shape
+    if h < 3 or w < 3:
+        raise ValueError(f"an image of {w} x {h} px is too small to estimate its noise")
+    response = np.abs(cv2.filter2D(values, -1, _IMMERKAER, borderType=cv2.BORDER_REFLECT))
+    col = np.clip(np.rint(np.nan_to_num(xy[:, 0])).astype(np.int64), 1, w - 2)
+    row = np.clip(np.rint(np.nan_to_num(xy[:, 1])).astype(np.int64), 1, h - 2)
+    return np.sqrt(np.pi / 2.0) * response[row, col] / 6.0
 
 
 def immerkaer_sigma(values: np.ndarray, xy: np.ndarray | None = None) -> float:
@@ -62,15 +78,11 @@ def immerkaer_sigma(values: np.ndarray, xy: np.ndarray | None = None) -> float:
     h, w = values.shape
     if h < 3 or w < 3:
         raise ValueError(f"an image of {w} x {h} px is too small to estimate its noise")
+    if xy is not None:
+        inner = immerkaer_response(values, xy)
+        return float(np.mean(inner)) if inner.size else float("nan")
     response = np.abs(cv2.filter2D(values, -1, _IMMERKAER, borderType=cv2.BORDER_REFLECT))
-    if xy is None:
-        inner = response[1:-1, 1:-1]
-    else:
-        col = np.clip(np.rint(xy[:, 0]).astype(np.int64), 1, w - 2)
-        row = np.clip(np.rint(xy[:, 1]).astype(np.int64), 1, h - 2)
-        inner = response[row, col]
-    if inner.size == 0:
-        return float("nan")
+    inner = response[1:-1, 1:-1]
     return float(np.sqrt(np.pi / 2.0) * np.mean(inner) / 6.0)
 
 

@@ -10,9 +10,11 @@ from fesdic_core.shape.gauge import (TANGENTIAL_RTOL, rigid_normal_modes, checke
 from fesdic_core.shape.operators import (current_nodes, shape_operators, GaussNewtonLog,
                                          ShapeResult, chi_square, chi_square_change,
                                          predicted_chi_square_change, shape_gauss_newton)
-from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
+from fesdic_core.shape.settings import (SHAPE_MAX_INVALID_SHARE, Measurement, MeasurementSettings,
+                                        ScaleReport)
 from fesdic_core.shape.uncertainty import (NoiseModel, LinearisedState, linearised_state,
                                            noise_model, shape_std)
+from fesdic_core.shape.validity import shape_validity
 from fesdic_core.shape.verdict import ShapeDivergedError, VerdictSettings, judge
 
 __all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calibrate_extrinsics",
@@ -24,4 +26,4 @@ __all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calib
            "predicted_chi_square_change", "shape_gauss_newton", "Measurement",
            "MeasurementSettings", "ScaleReport", "NoiseModel", "LinearisedState",
            "linearised_state", "noise_model", "shape_std", "ShapeDivergedError", "VerdictSettings",
-           "judge"]
+           "judge", "shape_validity", "SHAPE_MAX_INVALID_SHARE"]

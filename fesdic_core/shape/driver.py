@@ -41,6 +41,7 @@ from fesdic_core.shape.operators import (GaussNewtonLog, ShapeResult, chi_square
                                          current_nodes, shape_gauss_newton)
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
 from fesdic_core.shape.uncertainty import linearised_state, noise_model, shape_std
+from fesdic_core.shape.validity import shape_validity
 from fesdic_core.shape.verdict import ShapeDivergedError, _diverged, judge
 from fesdic_core.solve.solvers import BiasStepHook, DirectSolver, StartScaleHook, StepSolver
 
@@ -266,20 +267,30 @@ def conclude(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence, solv
     """
     failure = judge(reports[-1].residual_percent, reports[-1].noise_percent, q, mesh.nodes,
                     reports[-1], settings)
-    if failure is not None:
-        logger.info("measurement failed: %s", failure)     # the caller reads m.failure
     extras = {}
     finest = settings.scales[-1]
+    scaled = [c.scaled(finest) for c in cameras]
     if settings.uncertainty and np.all(np.isfinite(q)):
-        extras = _uncertainty(mesh, normals, nodal_areas(mesh), q, quad, images,
-                              [c.scaled(finest) for c in cameras], solver, settings,
-                              mask, sigma_gray, final)
-    return Measurement(q=q, nodes=current_nodes(mesh.nodes, normals, q), normals=normals,
+        extras = _uncertainty(mesh, normals, nodal_areas(mesh), q, quad, images, scaled, solver,
+                              settings, mask, sigma_gray, final)
+    nodes = current_nodes(mesh.nodes, normals, q)
+    validity = None
+    if np.all(np.isfinite(q)):
+        state = extras.get("state")
+        validity = shape_validity(mesh, nodes, q, quad, residual, images, scaled,
+                                  None if state is None else state.H, extras.get("shape_std_mm"))
+        logger.info("shape: %d of %d nodes valid locally", int(validity.valid.sum()),
+                    validity.valid.size)
+        if failure is None:
+            failure = validity.failure(nodes, settings.max_invalid_share)
+    if failure is not None:
+        logger.info("measurement failed: %s", failure)     # the caller reads m.failure
+    return Measurement(q=q, nodes=nodes, normals=normals,
                        cameras=tuple(cameras), residual=dataclasses.replace(residual, dr_dX=None),
                        quadrature=quad, history=history, iterations=iterations, time_s=time_s,
                        converged=failure is None and all(r.converged for r in reports),
                        noise_percent=reports[-1].noise_percent, failure=failure,
-                       scales=tuple(reports), **extras)
+                       scales=tuple(reports), validity=validity, **extras)
 
 
 def _uncertainty(mesh: SurfaceMesh, normals: np.ndarray, node_weights: np.ndarray, q: np.ndarray,

@@ -18,7 +18,8 @@ from fesdic_core.synthetic.specimen import Specimen
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Motion", "RigidMotion", "BendingMotion", "StretchMotion", "intersect_displaced"]
+__all__ = ["Motion", "RigidMotion", "BendingMotion", "StretchMotion", "HeightMotion",
+           "intersect_displaced"]
 
 #: a displacement of the specimen's material points: ``X`` (n, 3) on the undeformed surface
 #: ``z = height(x, y)`` (mm) -> ``u`` (n, 3) mm; the point and its paint move to ``X + u``
@@ -69,6 +70,21 @@ class StretchMotion:
         X = np.asarray(X, float)
         u = np.zeros_like(X)
         u[:, 0] = self.strain * (X[:, 0] - self.centre_x_mm)
+        return u
+
+
+@dataclass(frozen=True)
+class HeightMotion:
+    """Out-of-plane ``u = (0, 0, height(x, y))`` of a flat specimen's points: its paint moved
+    onto the surface ``z = height(x, y)`` of another specimen (e.g. ``twisted_plate(...).height``:
+    the flat plate, then the same paint twisted and wavy)."""
+
+    height: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, float)
+        u = np.zeros_like(X)
+        u[:, 2] = self.height(X[:, 0], X[:, 1])
         return u
 
 

@@ -40,6 +40,9 @@ A complete example (optional keys show their default in parentheses)::
                                   # reference shape keeps [method] prefilter_px. 1 px reads
                                   # sub-pixel motions within 1 % where 0.5 px reads them 1.4-3 %
                                   # low (benchmarks/bench_subpixel.py)        (default 1.0)
+    max_invalid_share = 0.03      # a frame fails when more of its nodes than this share are
+                                  # not valid locally (residual over the local noise,
+                                  # texture, conditioning, neighbours)      (default 0.03)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
@@ -61,6 +64,7 @@ from pathlib import Path
 from typing import Any
 
 from fesdic_core.displacement.driver import DISPLACEMENT_PREFILTER_PX, JACOBIANS
+from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
                                        OutputConfig, cameras_table, geometry_table, images_table,
@@ -103,6 +107,7 @@ class DisplacementConfig:
     jacobian: str = "reference"
     start: str = "features"
     prefilter_px: float = DISPLACEMENT_PREFILTER_PX
+    max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:
@@ -192,7 +197,9 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
         levels=t.take("levels", integer, "an integer", default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
         start=t.take("start", string, "a string", default=d.start),
-        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px))
+        prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
+        max_invalid_share=t.take("max_invalid_share", number, "a number (a share, 0 to 1)",
+                                 default=d.max_invalid_share))
     t.finish()
     check(t, "method", c.method, c.method in DISPLACEMENT_METHODS,
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
@@ -204,6 +211,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "prefilter_px", c.prefilter_px, c.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "start", c.start, c.start in START_MODES,
           "one of " + ", ".join(map(json.dumps, START_MODES)))
+    check(t, "max_invalid_share", c.max_invalid_share, 0.0 <= c.max_invalid_share <= 1.0,
+          "a share in [0, 1]")
     return c
 
 

@@ -4,7 +4,12 @@ It holds the frames' table (a failed frame greyed out with its reason: nothing i
 a success that is not), the residual and the mean displacement against the frame (failed
 frames marked, never joined to the curve), and maps of the last frame that succeeded:
 the three displacement components, the surface strain and the residual at the nodes,
-drawn in the best-fit plane of the reference surface.
+drawn in the best-fit plane of the reference surface, and which nodes are valid.
+
+The statistics (the table's mean displacement, the mean displacement against the frame)
+count only the nodes valid locally (:mod:`fesdic_core.displacement.validity`): a node the
+images do not determine, or that diverged, is never counted as measured. The table says how
+many nodes are valid in each frame; the maps grey the invalid nodes' triangles.
 """
 from __future__ import annotations
 
@@ -18,6 +23,18 @@ from matplotlib.tri import Triangulation
 
 from georeg_app.report.html import STYLESHEET
 from georeg_app.report.maps import bfp_frame, png
+
+
+def _valid_U(frame) -> np.ndarray:
+    """The displacements (m, 3) of a frame's valid nodes (every node without the checks)."""
+    U = np.asarray(frame.U, float)
+    return U if frame.valid is None else U[np.asarray(frame.valid, bool)]
+
+
+def _mean_valid(frame) -> np.ndarray:
+    """(3,) mean displacement of the valid nodes (NaN if none is valid)."""
+    U = _valid_U(frame)
+    return np.mean(U, axis=0) if len(U) else np.full(3, np.nan)
 
 __all__ = ["series_figure", "maps_figure", "track_report_html"]
 
@@ -41,11 +58,11 @@ def series_figure(run) -> bytes:
     ax_r.set_ylabel("residual (% of the dynamic range)")
     ax_r.legend(fontsize=8)
     if ok.any():
-        mean = 1e3 * np.array([np.mean(f.U, axis=0) for f in run.frames if f.ok])
+        mean = 1e3 * np.array([_mean_valid(f) for f in run.frames if f.ok])
         for k, name in enumerate("xyz"):
             ax_u.plot(index[ok], mean[:, k], "o-", label=f"mean u_{name}")
         ax_u.legend(fontsize=8)
-    ax_u.set_ylabel("mean displacement (µm)")
+    ax_u.set_ylabel("mean displacement of the valid nodes (µm)")
     if (~ok).any():
         fig.suptitle("dotted red lines: frames that failed (left out)", fontsize=9, color="#b22")
     fig.tight_layout()
@@ -77,13 +94,21 @@ def maps_figure(run) -> bytes | None:
     fields += [(f"strain_{n} (µε)", 1e6 * frame.strain[:, k], "RdBu_r", False)
                for k, n in enumerate(("xx", "yy", "xy"))]
     fields.append(("residual (%)", frame.residual_node, "viridis", False))
+    valid = (np.ones(run.mesh.n_nodes, bool) if frame.valid is None
+             else np.asarray(frame.valid, bool))
+    fields.append(("valid (1) / invalid (0) nodes", valid.astype(float), "RdYlGn", False))
+    # the invalid nodes are not measured: their triangles are masked in the field maps
+    mask = ~np.all(valid[tri.triangles], axis=1)
     fig = Figure(figsize=(13, 8))
     axes = fig.subplots(3, 3).ravel()
-    for ax, (title, values, cmap, _) in zip(axes, fields):
+    for k, (ax, (title, values, cmap, _)) in enumerate(zip(axes, fields)):
         values = np.asarray(values, float)
-        finite = np.isfinite(values)
-        shown = np.where(finite, values, np.nanmean(values) if finite.any() else 0.0)
-        artist = ax.tripcolor(tri, shown, shading="gouraud", cmap=cmap)
+        finite = np.isfinite(values) & (valid if k < len(fields) - 1 else True)
+        shown = np.where(finite, values, np.nanmean(values[finite]) if finite.any() else 0.0)
+        shown_tri = tri
+        if k < len(fields) - 1 and mask.any() and not mask.all():
+            shown_tri = Triangulation(tri.x, tri.y, tri.triangles, mask=mask)
+        artist = ax.tripcolor(shown_tri, shown, shading="gouraud", cmap=cmap)
         fig.colorbar(artist, ax=ax, shrink=0.8)
         ax.set_title(title, fontsize=9)
         ax.set_aspect("equal")
@@ -99,17 +124,21 @@ def maps_figure(run) -> bytes | None:
 def _frames_table(run) -> str:
     rows = []
     for f in run.frames:
-        mean = "" if f.U is None else ", ".join(f"{1e3 * v:.2f}" for v in np.mean(f.U, axis=0))
+        mean = "" if f.U is None else ", ".join(f"{1e3 * v:.2f}" for v in _mean_valid(f))
+        valid = "" if f.valid is None else f"{f.n_valid} of {len(f.valid)}"
         status = "ok" if f.ok else f"FAILED: {f.failure}"
         rows.append(f'<tr class="{"" if f.ok else "failed"}"><td>{f.index}</td>'
                     f"<td>{html.escape(f.cam0)}<br>{html.escape(f.cam1)}</td>"
                     f"<td>{f.residual_percent:.3f}</td><td>{f.noise_percent:.3f}</td>"
-                    f"<td>{mean}</td><td>{f.iterations}</td><td>{f.start_frame}</td>"
+                    f"<td>{valid}</td><td>{mean}</td><td>{f.iterations}</td><td>{f.start_frame}</td>"
                     f"<td>{f.time_s:.1f}</td><td class=\"status\">{html.escape(status)}</td></tr>")
     head = ("<tr><th>frame</th><th>images</th><th>residual (%)</th><th>noise floor (%)</th>"
-            "<th>mean u (µm)</th><th>iterations</th><th>started from</th><th>time (s)</th>"
+            "<th>valid nodes</th><th>mean u of the valid nodes (µm)</th><th>iterations</th><th>started from</th><th>time (s)</th>"
             "<th>status</th></tr>")
-    return "<table>\n" + head + "\n" + "\n".join(rows) + "\n</table>"
+    note = ("<p>Statistics count only the nodes valid locally (residual within the local noise, "
+            "texture, conditioning, consistent with their neighbours); the others are not "
+            "measured.</p>")
+    return "<table>\n" + head + "\n" + "\n".join(rows) + "\n</table>\n" + note
 
 
 def _figure(png_bytes: bytes, caption: str) -> str:

@@ -33,7 +33,9 @@ __all__ = ["FrameResult", "measure_frame", "frame_start", "chained_frame", "log_
 @dataclasses.dataclass(frozen=True, eq=False)
 class FrameResult:
     """One deformed pair's outcome (``U``, ``strain``, ``residual_node``: None if the frame
-    raised before any field; ``failure``: None for a trusted field)."""
+    raised before any field; ``failure``: None for a trusted field). ``valid`` (n,) bool and
+    ``residual_to_noise`` (n,): each node's local checks
+    (:attr:`~fesdic_core.displacement.driver.DisplacementMeasurement.valid`), None with no field."""
 
     index: int
     cam0: str
@@ -49,10 +51,17 @@ class FrameResult:
     time_s: float
     start_frame: int
     start: str = ""                 # where the starting field came from (:func:`frame_start`)
+    valid: np.ndarray | None = None
+    residual_to_noise: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
         return self.failure is None
+
+    @property
+    def n_valid(self) -> int | None:
+        """Number of nodes valid locally (None with no field)."""
+        return None if self.valid is None else int(np.count_nonzero(self.valid))
 
 
 def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
@@ -80,7 +89,9 @@ def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
                        residual_percent=float(m.residual_percent),
                        noise_percent=float(m.noise_percent), iterations=int(m.iterations),
                        converged=bool(m.converged), failure=m.failure,
-                       time_s=time.perf_counter() - t0, start_frame=start_frame, start=start)
+                       time_s=time.perf_counter() - t0, start_frame=start_frame, start=start,
+                       valid=np.asarray(m.valid, bool),
+                       residual_to_noise=np.asarray(m.residual_to_noise, float))
 
 
 def frame_start(reference: SeriesReference, index: int, images: Sequence,
@@ -136,9 +147,9 @@ def log_frame(frame: FrameResult, total: int) -> None:
     if frame.ok:
         mean = np.mean(frame.U, axis=0) * 1e3
         logger.info("frame %d of %d: residual %.3f%% (noise floor %.3f%%), mean displacement "
-                    "(%.1f, %.1f, %.1f) um, %d iterations, %.1f s", frame.index, total,
-                    frame.residual_percent, frame.noise_percent, *mean, frame.iterations,
-                    frame.time_s)
+                    "(%.1f, %.1f, %.1f) um, %s of %d nodes valid, %d iterations, %.1f s",
+                    frame.index, total, frame.residual_percent, frame.noise_percent, *mean,
+                    frame.n_valid, len(frame.U), frame.iterations, frame.time_s)
     else:
         logger.warning("frame %d of %d FAILED: %s", frame.index, total, frame.failure)
 

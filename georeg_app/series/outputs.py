@@ -5,7 +5,10 @@
   measures: ``frame_0006_GT4-0110_0.vtu``): the reference surface (mm, world frame) with point data ``displacement_mm`` (3),
   ``residual`` (percent of the reference images' dynamic range, root mean square of the two
   cameras at the nodes), ``strain_xx``, ``strain_yy``, ``strain_xy`` (surface Green-Lagrange
-  in the local tangent frame, :mod:`fesdic_core.displacement.strain`). A frame that failed
+  in the local tangent frame, :mod:`fesdic_core.displacement.strain`), ``valid`` (1 for a node
+  that passed its local checks, 0 for one the images do not determine or that diverged:
+  :mod:`fesdic_core.displacement.validity`) and ``residual_to_noise`` (the residual over the
+  node's support against the local noise floor there). A frame that failed
   its checks is written as ``frame_NNNN_<image>_failed.vtu`` (its untrusted field) and left
   out of the time series. The outputs are written even when every frame failed (there is
   then something to inspect; the command still exits with status 1).
@@ -28,7 +31,8 @@ from fesdic_core.fe.mesh_io import write_mesh
 from georeg_app.report.track import REPORT_FILE, track_report_html
 from georeg_app.shape.outputs import OutputWriter, _json_ready
 
-__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "image_stem", "frame_file", "track_summary", "pvd_text", "write_track"]
+__all__ = ["SUMMARY_FILE", "PVD_FILE", "REPORT_FILE", "image_stem", "frame_file", "valid_field",
+           "track_summary", "pvd_text", "write_track"]
 
 SUMMARY_FILE = "summary.json"
 PVD_FILE = "displacement.pvd"
@@ -50,6 +54,15 @@ def frame_file(frame) -> str | None:
             + ".vtu")
 
 
+def valid_field(frame) -> np.ndarray | None:
+    """The displacements (m, 3) of a frame's valid nodes (every node without the local
+    checks; None with no field or no valid node)."""
+    if frame.U is None:
+        return None
+    U = np.asarray(frame.U) if frame.valid is None else np.asarray(frame.U)[frame.valid]
+    return U if len(U) else None
+
+
 def _finite(value) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
 
@@ -58,19 +71,24 @@ def track_summary(run) -> dict:
     """``summary.json``: ``{"reference", "displacement", "scheduler", "time_s",
     "failed_frames": [index], "frames": [{"index", "cam0", "cam1", "residual_percent",
     "iterations", "converged", "time_s", "mesh_file", "status", "failure", "noise_percent",
-    "start_frame", "mean_displacement_mm", "max_displacement_mm"}]}``; ``status`` is "ok" or
-    "failed" (``failure`` says why); ``start_frame``: the frame whose field started this one
-    (0: from rest)."""
+    "start_frame", "mean_displacement_mm", "max_displacement_mm", "n_valid",
+    "valid_share"}]}``; ``status`` is "ok" or "failed" (``failure`` says why); ``start_frame``:
+    the frame whose field started this one (0: from rest); ``n_valid``: the nodes valid
+    locally (of ``n_nodes``), ``valid_share`` their share (None with no field); the mean and
+    largest displacements are those of the valid nodes."""
     frames = []
     for f in run.frames:
+        U = valid_field(f)
         frames.append({
             "index": f.index, "cam0": f.cam0, "cam1": f.cam1,
             "residual_percent": _finite(f.residual_percent), "iterations": int(f.iterations),
             "converged": bool(f.converged), "time_s": float(f.time_s), "mesh_file": frame_file(f),
             "status": "ok" if f.ok else "failed", "failure": f.failure,
             "noise_percent": _finite(f.noise_percent), "start_frame": int(f.start_frame),
-            "mean_displacement_mm": None if f.U is None else np.mean(f.U, axis=0),
-            "max_displacement_mm": None if f.U is None else float(np.max(np.linalg.norm(f.U, axis=1))),
+            "mean_displacement_mm": None if U is None else np.mean(U, axis=0),
+            "max_displacement_mm": None if U is None else float(np.max(np.linalg.norm(U, axis=1))),
+            "n_valid": f.n_valid,
+            "valid_share": None if f.valid is None else _finite(np.mean(f.valid)),
         })
     d = run.config.displacement
     return _json_ready({
@@ -79,7 +97,7 @@ def track_summary(run) -> dict:
                          "incremental": d.incremental,
                          "tikhonov_length_mm": d.tikhonov_length_mm if d.method == "tikhonov" else None,
                          "levels": d.levels if d.method == "georeg" else None,
-                         "jacobian": d.jacobian},
+                         "jacobian": d.jacobian, "max_invalid_share": d.max_invalid_share},
         "n_nodes": int(run.mesh.n_nodes), "scheduler": run.scheduler, "time_s": float(run.time_s),
         "failed_frames": [f.index for f in run.frames if not f.ok],
         "frames": frames,
@@ -101,8 +119,16 @@ def write_frame_vtu(path: str | os.PathLike, mesh, frame, element_face=None) -> 
         "displacement_mm": np.asarray(frame.U, float),
         "residual": np.asarray(frame.residual_node, float),
         "strain_xx": frame.strain[:, 0], "strain_yy": frame.strain[:, 1],
-        "strain_xy": frame.strain[:, 2]},
+        "strain_xy": frame.strain[:, 2], **_validity_data(frame)},
         cell_data=None if element_face is None else {"face": np.asarray(element_face, np.int32)})
+
+
+def _validity_data(frame) -> dict:
+    """The point data ``valid`` (0/1) and ``residual_to_noise`` of a frame, if it has them."""
+    if frame.valid is None:
+        return {}
+    return {"valid": np.asarray(frame.valid, np.uint8),
+            "residual_to_noise": np.asarray(frame.residual_to_noise, float)}
 
 
 def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> list[Path]:

@@ -174,7 +174,8 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     d = config.displacement
     settings = DisplacementSettings(scales=d.scale_sequence,
                                     normalisation=config.method.normalisation,
-                                    jacobian=d.jacobian)
+                                    jacobian=d.jacobian,
+                                    max_invalid_share=d.max_invalid_share)
     if d.prefilter_px != config.method.prefilter_px:     # the frames' image model
         images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)

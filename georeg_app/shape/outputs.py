@@ -227,12 +227,12 @@ def summary_dict(run) -> dict:
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
     "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
     "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
-    "levels_chosen", "regularization", "dropped_dofs"}]}``, plus ``"specimen"`` (the frame and
-    surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs`` (georeg):
-    per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
+    "levels_chosen", "regularization", "dropped_dofs", "n_valid", "valid_share"}]}``, plus
+    ``"specimen"`` (the frame and surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs``
+    (georeg): per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
     "slivers"}`` (the dofs outside the mesh's outline or seen by no point), else null. ``status`` is "ok" or
     "failed" (``failure`` says why); a method that failed without any state has null
-    measurement fields and no mesh file.
+    measurement fields and no mesh file. ``n_valid``, ``valid_share``: the nodes valid locally.
     """
     methods = []
     for result, stem in zip(run.results, method_stems(run)):
@@ -253,7 +253,7 @@ def summary_dict(run) -> dict:
             "shape_bias_median_mm": None, "shape_bias_max_mm": None, "noise_variance": None,
             "levels_chosen": _levels_chosen(result),
             "regularization": getattr(result, "regularization", None),
-            "dropped_dofs": getattr(result, "dropped_dofs", None),
+            "dropped_dofs": getattr(result, "dropped_dofs", None), "n_valid": None, "valid_share": None,
         }
         if m is not None:
             noise = getattr(m, "noise_percent", float("nan"))
@@ -272,7 +272,7 @@ def summary_dict(run) -> dict:
                                    "shape_converged": r.shape_converged,
                                    "fixed_point_converged": r.fixed_point_converged}
                                   for r in getattr(m, "scales", ())],
-                **_uncertainty_entry(m),
+                **_uncertainty_entry(m), **(getattr(m, "validity", None) and m.validity.counts() or {}),
             })
         methods.append(entry)
     failed = [e["label"] for e in methods if e["status"] != "ok"]
@@ -297,7 +297,7 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
     ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
     known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
-    ``shape_bias_mm`` (the bias indicator); the cell data ``seen_fraction`` (the share of
+    ``shape_bias_mm`` (the bias indicator), ``valid``, ``residual_to_noise``; the cell data ``seen_fraction`` (the share of
     each element's integration points at the finest scale that entered the residual: seen
     by both cameras, not hidden, not grazing, not in the edge margin; 0 where the shape is
     only carried by the regularization) and, for a part of several faces, ``face`` (each
@@ -306,7 +306,7 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     from fesdic_core.fe.mesh_io import write_mesh
     m = result.measurement
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
-    point_data = {"shape_correction_mm": np.asarray(m.q, float),
+    point_data = {"shape_correction_mm": np.asarray(m.q, float), **(getattr(m, "validity", None) and m.validity.point_data() or {}),
                   "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)}
     errors = getattr(result, "shape_error_mm", None)
     if errors is not None:

@@ -24,7 +24,9 @@ EXTRA = {"label": str, "converged": bool, "scales": list, "status": str,
          "noise_variance": (float, type(None)), "levels_chosen": (dict, type(None)),
          "regularization": (dict, type(None)),
          # issue 22: what each georeg level dropped on a non-rectangular outline
-         "dropped_dofs": (dict, type(None))}
+         "dropped_dofs": (dict, type(None)),
+         # issue 27: the nodes valid locally (null without the local checks)
+         "n_valid": (int, type(None)), "valid_share": (float, type(None))}
 
 
 def _tiny_figures():
@@ -198,3 +200,32 @@ def test_seen_fraction_is_the_share_of_each_element_s_points_in_the_mask():
     m = SimpleNamespace(quadrature=SimpleNamespace(element=np.array([0, 0, 1, 1, 1, 3])),
                         residual=SimpleNamespace(mask=np.array([True, False, True, True, False, True])))
     np.testing.assert_allclose(seen_fraction(m, 5), [0.5, 2 / 3, 0.0, 1.0, 0.0])
+
+
+def test_the_nodes_local_validity_goes_to_the_vtu_and_the_summary(tmp_path):
+    """A measurement with its local checks (fesdic_core.shape.validity): the VTU's point data
+    ``valid`` (0/1) and ``residual_to_noise``, summary.json's ``n_valid`` and ``valid_share``."""
+    import dataclasses
+    from fesdic_core.residual.validity import node_validity
+    run = fake_run()
+    result = run.results[0]
+    n = len(result.measurement.q)
+    ratio = np.full(n, 0.5)
+    ratio[[1, 4]] = [2.5, 7.0]
+    validity = node_validity(ratio, np.full(n, 10.0), np.ones(n), np.zeros(n))
+
+    @dataclasses.dataclass(frozen=True)
+    class Checked(type(result.measurement)):
+        validity: object = None
+
+    fields = {f.name: getattr(result.measurement, f.name)
+              for f in dataclasses.fields(result.measurement)}
+    checked = dataclasses.replace(result, measurement=Checked(**fields, validity=validity))
+    run = dataclasses.replace(run, results=(checked,) + tuple(run.results[1:]))
+    entry = summary_dict(run)["methods"][0]
+    assert entry["n_valid"] == n - 2 and entry["valid_share"] == pytest.approx((n - 2) / n)
+    assert summary_dict(run)["methods"][1]["n_valid"] is None         # no local checks
+    path = outputs.write_method_vtu(tmp_path / "fe.vtu", checked)
+    data = meshio.read(path).point_data
+    np.testing.assert_array_equal(data["valid"], validity.valid.astype(np.uint8))
+    np.testing.assert_allclose(data["residual_to_noise"], ratio)
