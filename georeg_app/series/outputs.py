@@ -71,9 +71,10 @@ def track_summary(run) -> dict:
     """``summary.json``: ``{"reference", "displacement", "scheduler", "time_s",
     "failed_frames": [index], "frames": [{"index", "cam0", "cam1", "residual_percent",
     "iterations", "converged", "time_s", "mesh_file", "status", "failure", "noise_percent",
-    "start_frame", "mean_displacement_mm", "max_displacement_mm", "n_valid",
+    "start_frame", "start", "mean_displacement_mm", "max_displacement_mm", "n_valid",
     "valid_share"}]}``; ``status`` is "ok" or "failed" (``failure`` says why); ``start_frame``:
-    the frame whose field started this one (0: from rest); ``n_valid``: the nodes valid
+    the frame whose field started this one (0: from rest); ``start``: where the starting
+    field came from (``[displacement] start``: features, the previous field, zero); ``n_valid``: the nodes valid
     locally (of ``n_nodes``), ``valid_share`` their share (None with no field); the mean and
     largest displacements are those of the valid nodes."""
     frames = []
@@ -85,6 +86,7 @@ def track_summary(run) -> dict:
             "converged": bool(f.converged), "time_s": float(f.time_s), "mesh_file": frame_file(f),
             "status": "ok" if f.ok else "failed", "failure": f.failure,
             "noise_percent": _finite(f.noise_percent), "start_frame": int(f.start_frame),
+            "start": f.start,
             "mean_displacement_mm": None if U is None else np.mean(U, axis=0),
             "max_displacement_mm": None if U is None else float(np.max(np.linalg.norm(U, axis=1))),
             "n_valid": f.n_valid,

@@ -61,6 +61,7 @@ def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, 
     assert summary["displacement"]["jacobian"] == "reference"          # the default
     assert not frames[2]["converged"] and all(frames[k]["converged"] for k in (0, 1, 3))
     assert [f["start_frame"] for f in frames] == [0, 1, 2, 2]       # on from the last good one
+    assert all(f["start"] for f in frames if f["status"] == "ok")     # where each start came from
     for key in ("index", "cam0", "cam1", "residual_percent", "iterations", "converged", "time_s",
                 "mesh_file"):
         assert all(key in f for f in frames)
