@@ -157,11 +157,11 @@ class TriangleSurface:
                    + v[None, :, None] * (t[:, None, 2] - t[:, None, 0]))
             samples.append(pts.reshape(-1, 3))
             owner.append(np.repeat(rows, len(u)))
-        samples, owner = np.concatenate(samples), np.concatenate(owner)
+        points, owners = np.concatenate(samples), np.concatenate(owner)
         logger.debug("triangle surface: %d triangles, %d samples every %.3g mm", len(T),
-                     len(samples), spacing_mm)
-        return cls(triangles=T, normals=cross / double_area[:, None], samples=samples,
-                   sample_triangle=owner, spacing_mm=float(spacing_mm), tree=cKDTree(samples))
+                     len(points), spacing_mm)
+        return cls(triangles=T, normals=cross / double_area[:, None], samples=points,
+                   sample_triangle=owners, spacing_mm=float(spacing_mm), tree=cKDTree(points))
 
     @property
     def area_mm2(self) -> float:

@@ -177,7 +177,10 @@ def detect_features(values: np.ndarray, mask: np.ndarray | None = None,
         sift = cv2.SIFT_create()  # type: ignore[attr-defined]
         quota = int(np.ceil(max_features / spread_cells ** 2))
         keypoints = _spread(sift.detect(image, m), image.shape, spread_cells, quota)
-        keypoints, descriptors = sift.compute(image, keypoints) if keypoints else ((), None)
+        if keypoints:
+            keypoints, descriptors = sift.compute(image, keypoints)
+        else:
+            keypoints, descriptors = [], None
     else:
         sift = cv2.SIFT_create(nfeatures=int(max_features))  # type: ignore[attr-defined]
         keypoints, descriptors = sift.detectAndCompute(image, m)

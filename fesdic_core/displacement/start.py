@@ -293,10 +293,11 @@ def feature_start(features: FeatureReference, images: Sequence[Image], cameras: 
         both = both[epipolar_distance_px(cam0, cam1, q0[both], q1[both])
                     <= settings.max_epipolar_px]
     Y, _ = triangulate(cam0, cam1, q0[both], q1[both])
-    counts = dict(matches=(m0, m1), inliers=(n0, n1), points=int(both.size))
+    matches, inliers, points = (m0, m1), (n0, n1), int(both.size)
     if both.size < settings.min_points:
-        report = StartReport(**counts, failure=f"{both.size} points tracked in both cameras, "
-                                               f"at least {settings.min_points} needed")
+        report = StartReport(matches, inliers, points,
+                             failure=f"{both.size} points tracked in both cameras, "
+                                     f"at least {settings.min_points} needed")
         return FeatureStart(None, report)
     d = Y - features.X_mm[both]
     length = features.length_mm if settings.length_mm is None else settings.length_mm
@@ -304,7 +305,8 @@ def feature_start(features: FeatureReference, images: Sequence[Image], cameras: 
                     features.nodes, length, settings.trim, settings.max_refits,
                     floor_mm=settings.floor_px * features.mm_per_px)
     median = float(np.median(np.linalg.norm(d[fit.kept], axis=1)))
-    report = StartReport(**counts, kept=int(fit.kept.sum()), rms_mm=fit.rms_mm, median_mm=median)
+    report = StartReport(matches, inliers, points, kept=int(fit.kept.sum()), rms_mm=fit.rms_mm,
+                         median_mm=median)
     return FeatureStart(fit.U, report)
 
 

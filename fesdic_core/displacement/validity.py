@@ -113,6 +113,9 @@ def displacement_validity(view: ReferenceView, res: DisplacementResidual, U: np.
             blocks = hessian_blocks(view.hessian)
         else:
             blocks = residual_blocks(quad, res)
+    if blocks is None:
+        raise ValueError("displacement_validity: no diagonal blocks of H (a residual without "
+                         "its derivative and a view without H)")
     conditioning = block_conditioning(blocks, support.total(quad.weight_mm2))
     std = _predicted_std(blocks, sigma_r, mean_weight)
     neighbours = node_neighbours([g.connectivity for g in quad.groups], quad.n_nodes)

@@ -28,19 +28,21 @@ def charuco_board(target: "Target"):
         raise ValueError(f"target dictionary {name!r} is not one of OpenCV's ArUco dictionaries "
                          "(e.g. DICT_4X4_50, DICT_5X5_100, DICT_6X6_250)")
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+    if target.marker_mm is None:
+        raise ValueError("a charuco target needs marker_mm")
     return cv2.aruco.CharucoBoard((target.columns, target.rows), float(target.pitch_mm),
                                   float(target.marker_mm), dictionary)
 
 
 def _blob_detector(gray: np.ndarray):
-    params = cv2.SimpleBlobDetector_Params()
+    params = cv2.SimpleBlobDetector_Params()  # type: ignore[attr-defined]
     params.minArea = 10.0
     params.maxArea = 0.05 * gray.size
     params.filterByColor, params.blobColor = True, 0
     params.filterByCircularity, params.minCircularity = True, 0.6
     params.filterByConvexity, params.minConvexity = True, 0.8
     params.filterByInertia, params.minInertiaRatio = True, 0.2
-    return cv2.SimpleBlobDetector_create(params)
+    return cv2.SimpleBlobDetector_create(params)  # type: ignore[attr-defined]
 
 
 def _refined(gray: np.ndarray, corners: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -166,7 +166,9 @@ def released_bundle(points: np.ndarray, ids: Sequence[np.ndarray], px0: Sequence
                                    o_stereo))
                 for block, start in blocks:
                     rr, cc = np.meshgrid(row, start + np.arange(block.shape[1]), indexing="ij")
-                    rows.append(rr.ravel()), cols.append(cc.ravel()), vals.append(block.ravel())
+                    rows.append(rr.ravel())
+                    cols.append(cc.ravel())
+                    vals.append(block.ravel())
                 # d proj / d X = d proj / d t  R   (x_cam = R X + t)
                 Rc = cv2.Rodrigues(r_c)[0]
                 dX = (Jt.reshape(len(X), 2, 3) @ Rc)                  # (m/2, 2, 3)

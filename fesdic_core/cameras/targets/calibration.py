@@ -170,9 +170,9 @@ def _point_outliers(residuals: Sequence[np.ndarray]) -> list[np.ndarray]:
 def _stereo(objects, px0, px1, K, dist, size, model: CalibrationModel):
     flags = cv2.CALIB_USE_INTRINSIC_GUESS | model.flags
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-12)
-    out = cv2.stereoCalibrateExtended(objects, px0, px1, K[0].copy(), dist[0].copy(), K[1].copy(),
-                                      dist[1].copy(), size, None, None, flags=flags,
-                                      criteria=criteria)
+    out = cv2.stereoCalibrateExtended(  # type: ignore[call-overload]
+        objects, px0, px1, K[0].copy(), dist[0].copy(), K[1].copy(), dist[1].copy(), size, None,
+        None, flags=flags, criteria=criteria)
     _, K0, d0, K1, d1, R, T, _, _, rvecs, tvecs, _ = out
     return [K0, K1], [d0.ravel()[:5], d1.ravel()[:5]], R, T.ravel(), rvecs, tvecs
 
@@ -270,7 +270,10 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
     K, dist, keep, reasons = [], [], [], []
     for c, (ds, size) in enumerate(((detections0, size0), (detections1, size1))):
         k, d, kept, why = _intrinsics(ds, target, size, model, f"camera {c}")
-        K.append(k), dist.append(d), keep.append(kept), reasons.append(why)
+        K.append(k)
+        dist.append(d)
+        keep.append(kept)
+        reasons.append(why)
     common = {}
     for v in range(len(detections0)):
         if v in keep[0] and v in keep[1]:
@@ -295,7 +298,9 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
             if v in px_shift:
                 p0 = p0 - px_shift[v][0].reshape(-1, 1, 2).astype(np.float32)
                 p1 = p1 - px_shift[v][1].reshape(-1, 1, 2).astype(np.float32)
-            objects.append(o), px0.append(p0), px1.append(p1)
+            objects.append(o)
+            px0.append(p0)
+            px1.append(p1)
         K, dist, R, T, rvecs, tvecs = _stereo(objects, px0, px1, K, dist, size0, model)
         res0 = _residuals(objects, px0, K[0], dist[0], rvecs, tvecs)
         res1 = _residuals(objects, px1, K[1], dist[1], rvecs, tvecs, R, T)
@@ -326,6 +331,8 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
             bias_corrected = True
             continue
         break
+    if R is None or T is None or rvecs is None or tvecs is None:   # (the loop ran)
+        raise CalibrationError("stereo calibration: no stereo solution")
     free = model.free
     target_deviation = None
     if model.refine_target:
@@ -354,7 +361,7 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
     std["T"] = std_all[2 * n + 3:2 * n + 6].tolist()
     t_hat = T / np.linalg.norm(T)
     rvec = cv2.Rodrigues(R)[0].ravel()
-    r_hat = rvec / max(np.linalg.norm(rvec), 1e-300)
+    r_hat = rvec / max(float(np.linalg.norm(rvec)), 1e-300)
     std["baseline_mm"] = float(np.sqrt(t_hat @ cov[2 * n + 3:2 * n + 6, 2 * n + 3:2 * n + 6] @ t_hat))
     std["stereo_angle_deg"] = float(np.degrees(np.sqrt(r_hat @ cov[2 * n:2 * n + 3, 2 * n:2 * n + 3] @ r_hat)))
     epi = np.vstack([epipolar_distances(a.reshape(-1, 2), b.reshape(-1, 2), K, dist, R, T)

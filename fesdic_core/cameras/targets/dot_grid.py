@@ -173,6 +173,8 @@ def match_grid(blobs: Blobs, grid_xy: np.ndarray, marker_xy: np.ndarray,
         grid, blob = _grow(blobs, grid_xy, H, max_iterations, seeds)
         if best is None or len(grid) > len(best[0]):
             best = (grid, blob)
+    if best is None:
+        return empty[0], empty[1], "no assignment of the ring markers"
     grid, blob = best
     if len(grid) < 6:
         return empty[0], empty[1], f"only {len(grid)} dots fit the grid of the markers"
