@@ -3,7 +3,7 @@
 The field is an affine part ``B [X, 1]`` plus a nodal field ``V`` regularized by the
 surface-gradient operator ``A`` of Eq. 10 (:func:`~fesdic_core.solve.tikhonov.
 surface_gradient_operator`), the weight ``lam`` from a cosine of wavelength ``length_mm``
-(:func:`~fesdic_core.solve.tikhonov.tikhonov_weight`):
+(:func:`~fesdic_core.solve.tikhonov.tikhonov_weight`)::
 
     min  sum_i w_i |B [X_i, 1] + L_i V - d_i|^2 + lam V^T A V,
 

@@ -19,7 +19,7 @@ larger motion the start comes from features (as VIC-3D's and DICe's seeds do):
    ``d_i = Y_i - X_i``;
 3. a robust smooth fit of those on the mesh
    (:func:`~fesdic_core.displacement.smooth_fit.fit_field`): an affine field plus a
-   nodal field ``V`` regularized by the surface-gradient operator ``A`` of Eq. 10,
+   nodal field ``V`` regularized by the surface-gradient operator ``A`` of Eq. 10::
 
        min  sum_i w_i |B [X_i, 1] + L_i V - d_i|^2 + lam V^T A V,
 
