@@ -67,6 +67,20 @@ def _common(parser: argparse.ArgumentParser, suppress: bool) -> None:
                        help="debug messages, and the traceback of an error")
 
 
+def _config_command(sub, name: str, text: str, default_out: Path | None = None,
+                    config_help: str = "configuration (TOML)") -> argparse.ArgumentParser:
+    """A sub-command of one configuration file, ``--out`` and ``--overwrite``."""
+    p = sub.add_parser(name, help=text)
+    p.add_argument("config", type=Path, metavar="CONFIG.toml", help=config_help)
+    p.add_argument("--out", type=Path, default=default_out,
+                   help="output folder (default: " + (str(default_out) if default_out is not None
+                                                      else "[output] dir of the configuration")
+                        + ")")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the contents of a non-empty output folder")
+    return p
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=PROG, description="FE stereo-DIC shape measurement with multilevel geometric "
@@ -83,39 +97,20 @@ def build_parser() -> argparse.ArgumentParser:
                       help="replace the contents of a non-empty output folder")
     for name, text in (("measure", "measure the shape with the method of the configuration"),
                        ("compare", "run all methods (FE, Tikhonov, georeg) on the same data")):
-        p = sub.add_parser(name, help=text)
-        p.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
-        p.add_argument("--out", type=Path, default=None,
-                       help="output folder (default: [output] dir of the configuration)")
-        p.add_argument("--overwrite", action="store_true",
-                       help="replace the contents of a non-empty output folder")
-    track = sub.add_parser("track", help="displacement of the measured surface over a series of "
-                                         "stereo pairs ([series], [displacement])")
-    track.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
-    track.add_argument("--out", type=Path, default=None,
-                       help="output folder (default: [output] dir of the configuration)")
-    track.add_argument("--overwrite", action="store_true",
-                       help="replace the contents of a non-empty output folder")
+        _config_command(sub, name, text)
+    track = _config_command(sub, "track", "displacement of the measured surface over a series "
+                                          "of stereo pairs ([series], [displacement])")
     track.add_argument("--scheduler", default="serial",
                        help='"serial" (default, this process), "threads" or "processes" (a local '
                             'Dask cluster), or tcp://HOST:PORT (an existing Dask scheduler)')
     track.add_argument("--workers", type=int, default=None,
                        help="workers of a local Dask cluster (default: Dask's choice)")
-    preview = sub.add_parser("preview", help="the set-up at a glance, without measuring: the mesh "
-                                             "projected in both images, the landmarks")
-    preview.add_argument("config", type=Path, metavar="CONFIG.toml",
-                         help="configuration (TOML) of measure or compare")
-    preview.add_argument("--out", type=Path, default=Path(DEFAULT_PREVIEW_OUT),
-                         help=f"output folder (default: {DEFAULT_PREVIEW_OUT})")
-    preview.add_argument("--overwrite", action="store_true",
-                         help="replace the contents of a non-empty output folder")
-    calibrate = sub.add_parser("calibrate", help="calibrate the stereo rig from pairs of target "
-                                                 "images ([images], [target], [model])")
-    calibrate.add_argument("config", type=Path, metavar="CONFIG.toml", help="configuration (TOML)")
-    calibrate.add_argument("--out", type=Path, default=None,
-                           help="output folder (default: [output] dir of the configuration)")
-    calibrate.add_argument("--overwrite", action="store_true",
-                           help="replace the contents of a non-empty output folder")
+    _config_command(sub, "preview", "the set-up at a glance, without measuring: the mesh "
+                                    "projected in both images, the landmarks",
+                    default_out=Path(DEFAULT_PREVIEW_OUT),
+                    config_help="configuration (TOML) of measure or compare")
+    _config_command(sub, "calibrate", "calibrate the stereo rig from pairs of target images "
+                                      "([images], [target], [model])")
     for p in sub.choices.values():
         _common(p, suppress=True)
     return parser
