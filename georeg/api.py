@@ -104,8 +104,10 @@ def _config(name: str, images, cameras, nominal, options: dict, landmarks, sourc
         base = Path.cwd()
         method = method_config(given)
         image_config, loaded = images_config(images, method, base)
-        config = Config(images=image_config, cameras=cameras_config(cameras, base, source, landmarks),
-                        geometry=geometry_config(nominal, base), method=method,
+        geometry = geometry_config(nominal, base)
+        config = Config(images=image_config,
+                        cameras=cameras_config(cameras, base, source, landmarks, geometry),
+                        geometry=geometry, method=method,
                         output=OutputConfig(Path(out) if out is not None else Path("georeg_out")),
                         source=None)
     if out is not None:
@@ -226,8 +228,8 @@ def _track_config(images, cameras, nominal, series, displacement, reference, opt
         if cameras is None or nominal is None:
             raise TypeError("track(): give cameras and nominal, or reference= a `georeg "
                             "measure` output folder")
-        cams, geometry, ref = (cameras_config(cameras, base, source, landmarks),
-                               geometry_config(nominal, base), None)
+        geometry, ref = geometry_config(nominal, base), None
+        cams = cameras_config(cameras, base, source, landmarks, geometry)
     return TrackConfig(images=image_config, cameras=cams, geometry=geometry, method=method,
                        series=frames, displacement=disp, reference=ref,
                        output=OutputConfig(Path(out) if out is not None else Path("track_out")),

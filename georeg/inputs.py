@@ -123,13 +123,15 @@ def camera_source(path: Path) -> str:
 
 
 def cameras_config(cameras: Any, base: Path, source: str | None = None,
-                   landmarks: Sequence[dict] | None = None) -> CamerasConfig:
+                   landmarks: Sequence[dict] | None = None,
+                   geometry: GeometryConfig | None = None) -> CamerasConfig:
     """``cameras``, a calibration file or a pair of core ``Camera``s, as ``[cameras]``.
 
     ``source``: the ``[cameras]`` key (``file``, ``pyvale_csv``, ``opencv``, ``vic3d``,
     ``dice``) when the file's kind is not to be guessed (:func:`camera_source`);
     ``landmarks``: the ``[[landmarks]]`` tables (``xyz_mm``, ``cam0_px``, ``cam1_px``) that
-    pose another tool's calibration.
+    pose another tool's calibration; ``geometry``: the run's ``[geometry]``, which may place
+    the specimen itself (``kind = "roi"``, or ``"cad"`` with a ``pose``: no landmarks needed).
     """
     if isinstance(cameras, CamerasConfig):
         return cameras
@@ -139,7 +141,10 @@ def cameras_config(cameras: Any, base: Path, source: str | None = None,
         if source is None:
             resolved = path if path.is_absolute() else base / path
             source = camera_source(resolved) if resolved.is_file() else "file"
-        return cameras_table({source: os.fspath(path)}, raw, Path("cameras"), base)
+        placed_by = {} if geometry is None else {
+            "roi": geometry.kind == "roi",
+            "pose": geometry.kind == "cad" and getattr(geometry, "pose", None) is not None}
+        return cameras_table({source: os.fspath(path)}, raw, Path("cameras"), base, **placed_by)
     pair = _pair(cameras, "cameras", "cameras")
     for k, cam in enumerate(pair):
         if not isinstance(cam, Camera):

@@ -111,3 +111,16 @@ def test_measure_with_toml_and_out_checks_the_folder_before_computing(tmp_path, 
     assert api.load_config(tmp_path / "run.toml") == load_config(tmp_path / "run.toml")
     with pytest.raises(FileExistsError, match="not empty.*overwrite=True"):
         api.measure(tmp_path / "run.toml", out=tmp_path / "out")
+
+
+def test_a_geometry_that_places_itself_needs_no_landmarks_with_a_calibration_file(tmp_path):
+    """As in a TOML file: kind = "roi", or kind = "cad" with a pose, places the specimen, so
+    another tool's calibration is used without [[landmarks]]; any other geometry needs them."""
+    path = write_opencv_stereo(tmp_path / "stereo.yml", demo_cameras(image_size=(320, 240)))
+    roi = GeometryConfig("roi", polygon_px=((10, 10), (100, 10), (100, 90)))
+    assert cameras_config(path, tmp_path, geometry=roi).opencv == path
+    cad = GeometryConfig("cad", file=tmp_path / "part.igs", pose="auto")
+    assert cameras_config(path, tmp_path, geometry=cad).landmarks == ()
+    with pytest.raises(ValueError, match="needs at least 4 \\[\\[landmarks\\]\\]"):
+        cameras_config(path, tmp_path, geometry=GeometryConfig("rectangle", length_mm=10.0,
+                                                               width_mm=5.0))
