@@ -12,6 +12,7 @@
 """
 from __future__ import annotations
 
+import base64
 import html
 import io
 import os
@@ -140,7 +141,7 @@ def _g(value, digits=6) -> str:
 
 
 def report_html(run: CalibrationRun, summary: dict, figure: bytes) -> str:
-    import base64
+    """The self-contained report (figure embedded) of ``run`` and its ``summary``."""
     s = summary
     parts = [f"<h1>Stereo calibration</h1><p>{html.escape(str(run.config.source))}: "
              f"{s['views_used']} of {s['views_total']} views used, reprojection RMS "
