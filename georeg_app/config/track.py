@@ -42,7 +42,10 @@ A complete example (optional keys show their default in parentheses)::
                                   # low (benchmarks/bench_subpixel.py)        (default 1.0)
     max_invalid_share = 0.03      # a frame fails when more of its nodes than this share are
                                   # not valid locally (residual over the local noise,
-                                  # texture, conditioning, neighbours)      (default 0.03)
+                                  # texture, conditioning, neighbours). By default 1: the
+                                  # nodes' validity is written, no frame fails on it (on real
+                                  # images converged frames reach 3-7 %; 0.03 catches the
+                                  # local divergences of renders)            (default 1.0)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
@@ -63,8 +66,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fesdic_core.displacement.driver import DISPLACEMENT_PREFILTER_PX, JACOBIANS
-from fesdic_core.residual.validity import DEFAULT_MAX_INVALID_SHARE
+from fesdic_core.displacement.driver import (DISPLACEMENT_MAX_INVALID_SHARE,
+                                             DISPLACEMENT_PREFILTER_PX, JACOBIANS)
 
 from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
                                        OutputConfig, cameras_table, geometry_table, images_table,
@@ -107,7 +110,7 @@ class DisplacementConfig:
     jacobian: str = "reference"
     start: str = "features"
     prefilter_px: float = DISPLACEMENT_PREFILTER_PX
-    max_invalid_share: float = DEFAULT_MAX_INVALID_SHARE
+    max_invalid_share: float = DISPLACEMENT_MAX_INVALID_SHARE
 
     @property
     def scale_sequence(self) -> tuple[int, ...]:

@@ -106,11 +106,12 @@ def test_a_georeg_frame_keeps_its_nodes_valid(twist_wave_pair):
 
 
 def test_the_invalid_share_is_a_displacement_key(tmp_path):
-    """``[displacement] max_invalid_share``: default 0.03, a share in [0, 1], named when wrong."""
+    """``[displacement] max_invalid_share``: default 1 (reported, fails no frame), a share in
+    [0, 1], named when wrong."""
     from georeg_app.config.toml_schema import ConfigError
     from georeg_app.config.track import displacement_table
     source = tmp_path / "track.toml"
-    assert displacement_table({}, source).max_invalid_share == 0.03
+    assert displacement_table({}, source).max_invalid_share == 1.0
     assert displacement_table({"max_invalid_share": 0.1}, source).max_invalid_share == 0.1
     for wrong in (1.5, "0.1"):
         with pytest.raises(ConfigError, match=r"\[displacement\].*max_invalid_share"):
