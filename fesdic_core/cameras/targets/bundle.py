@@ -91,7 +91,7 @@ def released_bundle(points: np.ndarray, ids: Sequence[np.ndarray], px0: Sequence
                     px1: Sequence[np.ndarray], K: Sequence[np.ndarray], dist: Sequence[np.ndarray],
                     R: np.ndarray, T: np.ndarray, rvecs: Sequence[np.ndarray],
                     tvecs: Sequence[np.ndarray], free_intrinsics: np.ndarray, free_points: np.ndarray,
-                    tie_aspect: bool = False) -> BundleResult:
+                    tie_aspect: bool = False, refine: bool = True) -> BundleResult:
     """Minimise both cameras' reprojection error over intrinsics, stereo, poses and points.
 
     Parameters
@@ -103,6 +103,8 @@ def released_bundle(points: np.ndarray, ids: Sequence[np.ndarray], px0: Sequence
     free_intrinsics : (9,) bool over fx fy cx cy k1 k2 p1 p2 k3.
     free_points : (N, 3) bool, :func:`gauge_mask`.
     tie_aspect : ``fy / fx`` kept.
+    refine : minimise (True), or only linearise at the start (False: the covariance of an
+        optimum found elsewhere, e.g. by OpenCV's stereo calibration).
     """
     n_views, fi = len(ids), np.asarray(free_intrinsics, bool)
     ni = int(fi.sum())
@@ -187,7 +189,7 @@ def released_bundle(points: np.ndarray, ids: Sequence[np.ndarray], px0: Sequence
                            shape=(len(r), n_par))
         return r, Jm
 
-    x = _levenberg_marquardt(evaluate, x0)
+    x = _levenberg_marquardt(evaluate, x0) if refine else x0
     r, Jm = evaluate(x, True)
     dof = len(r) - n_par
     sigma2 = float(r @ r) / dof

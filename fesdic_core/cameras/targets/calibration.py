@@ -15,7 +15,7 @@
    (:func:`~fesdic_core.cameras.targets.covariance.circle_centre_bias`); with the poses of
    step 3 the bias is subtracted from every detection and step 3 is redone.
 5. **Its own uncertainty**: the covariance of every parameter from the Jacobian at the
-   optimum (:func:`~fesdic_core.cameras.targets.covariance.stereo_covariance`), the
+   optimum (the stereo bundle of :mod:`~fesdic_core.cameras.targets.bundle` linearised), the
    epipolar distance of the target points.
 
 Camera 0 is the world frame: ``cameras[0]`` has zero extrinsics, ``cameras[1]`` the stereo
@@ -34,7 +34,7 @@ from fesdic_core.cameras.camera import Camera
 from fesdic_core.cameras.rig import CalibrationError
 from fesdic_core.cameras.targets.bundle import gauge_mask, released_bundle
 from fesdic_core.cameras.targets.covariance import (INTRINSIC_NAMES, circle_centre_bias,
-                                                     epipolar_distances, stereo_covariance)
+                                                     epipolar_distances)
 from fesdic_core.cameras.targets.target import Detection, Target
 
 logger = logging.getLogger(__name__)
@@ -335,24 +335,21 @@ def calibrate_stereo(detections0: Sequence[Detection], detections1: Sequence[Det
         raise CalibrationError("stereo calibration: no stereo solution")
     free = model.free
     target_deviation = None
+    grid_points = target.object_points()
+    # the stereo bundle at its optimum gives the covariance; refine_target also releases
+    # the target's points and moves the optimum
+    free_points = (gauge_mask(len(grid_points), _anchors(target, common)) if model.refine_target
+                   else np.zeros((len(grid_points), 3), bool))
+    bundle = released_bundle(grid_points, [common[v] for v in views],
+                             [p.reshape(-1, 2) for p in px0], [p.reshape(-1, 2) for p in px1],
+                             K, dist, R, T, rvecs, tvecs, free, free_points,
+                             tie_aspect=model.fix_aspect, refine=model.refine_target)
+    cov, sigma = bundle.cov, bundle.sigma_px
     if model.refine_target:
-        grid_points = target.object_points()
-        bundle = released_bundle(grid_points, [common[v] for v in views],
-                                 [p.reshape(-1, 2) for p in px0], [p.reshape(-1, 2) for p in px1],
-                                 K, dist, R, T, rvecs, tvecs, free,
-                                 gauge_mask(len(grid_points), _anchors(target, common)),
-                                 tie_aspect=model.fix_aspect)
         K, dist, R, T = bundle.K, bundle.dist, bundle.R, bundle.T
         res0 = [r[0] for r in bundle.residuals]
         res1 = [r[1] for r in bundle.residuals]
-        cov, sigma = bundle.cov, bundle.sigma_px
         target_deviation = bundle.points - grid_points
-    else:
-        cov, sigma, _ = stereo_covariance([o.reshape(-1, 3) for o in objects],
-                                          [p.reshape(-1, 2) for p in px0],
-                                          [p.reshape(-1, 2) for p in px1],
-                                          K, dist, R, T, rvecs, tvecs, free,
-                                          tie_aspect=model.fix_aspect)
     std_all = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     names = [n for n, f in zip(INTRINSIC_NAMES, free) if f]
     n = len(names)
