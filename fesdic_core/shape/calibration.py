@@ -43,7 +43,8 @@ from fesdic_core.solve.damping import damped_step, relaxed
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "calibrate_extrinsics"]
+__all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "pose_normal_equations",
+           "calibrate_extrinsics"]
 
 
 @dataclass(frozen=True)
@@ -116,8 +117,8 @@ _ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (ro
                      # below the size at which OpenBLAS uses its threads (slow when loaded)
 
 
-def _normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
-                      stereo: tuple | None, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def pose_normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence,
+                          stereo: tuple | None, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``M = sum_g w_g G_g G_g^T`` and ``-sum_g w_g G_g r_g`` of Eq. 6, block by block (with
     the stereo relation kept, ``G = u T`` and ``M = T^T (sum w u u^T) T``)."""
     k = 6 if stereo is not None else 12
@@ -207,7 +208,7 @@ def calibrate_extrinsics(X: np.ndarray, quad: PixelQuadrature, images: Sequence,
         if not np.isfinite(std):
             logger.warning("calibration: no integration point is seen by both cameras")
             break
-        M, rhs = _normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
+        M, rhs = pose_normal_equations(res, X, cams, stereo, np.where(res.mask, quad.weight_mm2, 0.0))
         plain = truncated_solve(M, rhs, rcond, frozen)                # the undamped step
         c, n = chi_square(res, quad)
         per_unit = n / c if c > 0.0 else np.inf              # chi-square units per unit of cost

@@ -1,12 +1,15 @@
-"""The drivers: fixed point of section 2.2 inside the multiscale loop of Remark 3.
+"""The drivers: poses and shape (section 2.2) inside the multiscale loop of Remark 3.
 
 For each image scale ``s``, coarse to fine (the solution of scale ``s`` starts scale
-``s - 1``)::
+``s - 1``), without calibration the shape Gauss-Newton of Eq. 7 (each step by the StepSolver
+hook); with calibration either one Gauss-Newton on the poses and the shape together
+(``coupling = "joint"``, the default, :mod:`fesdic_core.shape.joint`) or the paper's fixed
+point (``coupling = "alternate"``)::
 
     repeat until (p, q) stagnate:                    (fixed point, section 2.2)
-        p <- argmin_p j(S, p)      calibration, Eq. 6 (if asked)
+        p <- argmin_p j(S, p)      calibration, Eq. 6
         q <- argmin_q j(L^T q, p)  shape, Eq. 7, each step by the StepSolver hook
-        gauge: rigid normal part of q -> camera poses (if calibrating; see gauge.py)
+        gauge: rigid normal part of q -> camera poses (see gauge.py)
 
 Scale ``s`` uses the images aggregated ``s`` times (2x2 pixel means) and the matching
 cameras; the step solver is told ``s`` so that it can regularize accordingly.
@@ -37,6 +40,7 @@ from fesdic_core.residual.visibility import visibility_mask
 from fesdic_core.shape.calibration import calibrate_extrinsics
 from fesdic_core.shape.gauge import (pose_directions, rigid_normal_modes, tangential_motions,
                                      transfer_rigid_part)
+from fesdic_core.shape.joint import joint_gauss_newton
 from fesdic_core.shape.operators import (GaussNewtonLog, ShapeResult, chi_square_change,
                                          current_nodes, shape_gauss_newton)
 from fesdic_core.shape.settings import Measurement, MeasurementSettings, ScaleReport
@@ -157,7 +161,25 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         fixed_point_converged, previous_residual = not settings.calibrate, np.inf
         previous_fit: GrayLevelResidual | None = None
         known: GrayLevelResidual | None = first   # the residual at the current state
-        for fp in range(1, settings.max_fixed_point + 1):
+        joint = settings.calibrate and settings.coupling == "joint"
+        if joint:                   # poses and shape in one Gauss-Newton (joint.py)
+            out = joint_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
+                                     stereo, node_weights, settings.normalisation,
+                                     settings.max_iter, settings.tol_mm * coarse,
+                                     settings.fixed_point_tol_px, residual_rtol=None if finest
+                                     else settings.fixed_point_rtol, extra_mask=mask, log=log,
+                                     context={"fixed_point": 1}, start=first)
+            q, cams = out.q, [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, out.cameras)]
+            shape = ShapeResult(q=q, residual=out.residual, iterations=out.iterations,
+                                converged=out.converged, damping=out.damping, stop=out.stop)
+            result, final, fp = (out.residual, quad), out.residual, 1
+            total_iterations += out.iterations
+            fixed_point_converged = out.converged
+            logger.info("scale %d: joint Gauss-Newton, %d iterations, residual %.3f%% (%s; "
+                        "predicted chi-square fall %.3g)", scale, out.iterations,
+                        out.residual.std_percent, out.stop, out.decrement)
+        alternations = 0 if joint else settings.max_fixed_point   # the fixed point (section 2.2)
+        for fp in range(1, alternations + 1):
             context = {"fixed_point": fp}
             q_before, cams_before = q.copy(), list(cams)
             if settings.calibrate:

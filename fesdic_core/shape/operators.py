@@ -29,7 +29,7 @@ from fesdic_core.solve.solvers import StepSolver
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["current_nodes", "shape_operators", "GaussNewtonLog", "ShapeResult", "chi_square",
+__all__ = ["current_nodes", "shape_operators", "shape_pose_coupling", "GaussNewtonLog", "ShapeResult", "chi_square",
            "chi_square_change", "predicted_chi_square_change", "shape_gauss_newton"]
 
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
@@ -72,6 +72,37 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
         element_matrices.append(He)
         b += np.bincount(group.connectivity.ravel(), weights=be.ravel(), minlength=n)
     return assemble([g.connectivity for g in quad.groups], element_matrices, n), b
+
+
+def shape_pose_coupling(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelResidual,
+                        G: np.ndarray) -> np.ndarray:
+    """The off-diagonal block ``H_qp = sum_g w_g phi_g G_g^T`` (n, k) of the joint Gauss-Newton
+    system on the shape and the poses (:mod:`fesdic_core.shape.joint`).
+
+    ``phi_g`` as in :func:`shape_operators` (Eq. 8), ``G`` (g, k) the rows ``dr_g/dp`` of the
+    pose problem (Eq. 6, or any other per-point columns).
+    """
+    if res.dr_dX is None:
+        raise ValueError("shape_pose_coupling: the residual has no dr/dX")
+    w = np.where(res.mask, quad.weight_mm2, 0.0)
+    n, k = normals.shape[0], G.shape[1]
+    out = np.zeros((n, k))
+    for group in quad.groups:
+        E, (m, nn) = len(group.elements), group.N.shape
+        block = np.empty((E, nn, k))
+
+        def element_block(span: slice) -> None:
+            points = slice(group.start + span.start * m, group.start + span.stop * m)
+            g = res.dr_dX[points].reshape(-1, m, 3)
+            phi = (g @ normals[group.connectivity[span]].transpose(0, 2, 1)) * group.N
+            wG = (w[points, None] * G[points]).reshape(-1, m, k)
+            block[span] = phi.transpose(0, 2, 1) @ wG                        # (e, nn, k)
+
+        for_each_block(element_block, E, max(1, _ELEMENT_BLOCK // m))
+        nodes = group.connectivity.ravel()
+        for j in range(k):
+            out[:, j] += np.bincount(nodes, weights=block[..., j].ravel(), minlength=n)
+    return out
 
 
 @dataclass

@@ -17,6 +17,7 @@ from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.residual.graylevel import NORMALISATIONS, GrayLevelResidual
 from fesdic_core.residual.validity import NodeValidity
 from fesdic_core.residual.visibility import VisibilitySettings
+from fesdic_core.shape.joint import COUPLINGS
 from fesdic_core.shape.uncertainty import LinearisedState, NoiseModel
 
 __all__ = ["SHAPE_MAX_INVALID_SHARE", "MeasurementSettings", "ScaleReport", "Measurement"]
@@ -55,6 +56,9 @@ class MeasurementSettings:
         the finest scale only the stagnation of p and q ends them.
     keep_stereo : when calibrating, keep the stereo relation of the initial cameras
         (6 unknowns) instead of freeing both cameras (12 unknowns).
+    coupling : when calibrating, "joint" (one Gauss-Newton on the poses and the shape
+        together, :mod:`fesdic_core.shape.joint`) or "alternate" (the fixed point of section
+        2.2: calibration and shape in turn, ``max_fixed_point`` times at most).
     consistency_factor : the final residual may be at most this many times the noise
         floor of the images (:data:`fesdic_core.imaging.noise.CONSISTENCY_FACTOR`).
     max_shape_fraction : the correction may reach at most this fraction of the mesh's
@@ -82,6 +86,7 @@ class MeasurementSettings:
     scales: tuple[int, ...] = (0,)
     calibrate: bool = False
     keep_stereo: bool = True
+    coupling: str = "joint"
     normalisation: str = "element"
     max_fixed_point: int = 10
     max_iter: int = 20
@@ -102,6 +107,8 @@ class MeasurementSettings:
             raise ValueError(f"scales must be non-negative integers, got {self.scales!r}")
         if list(self.scales) != sorted(self.scales, reverse=True):
             raise ValueError(f"scales must go coarse to fine (decreasing), got {self.scales!r}")
+        if self.coupling not in COUPLINGS:
+            raise ValueError(f"coupling must be one of {COUPLINGS}, got {self.coupling!r}")
         if self.normalisation not in NORMALISATIONS:
             raise ValueError(f"normalisation must be one of {NORMALISATIONS}, got {self.normalisation!r}")
         if not self.edge_margin_px >= 0:

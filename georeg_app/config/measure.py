@@ -59,6 +59,8 @@ A complete example (every key; optional keys show their default in parentheses):
                                   # (chosen from the data)   (default [5, 10, 20, "auto"])
     calibrate = true              # fixed point calibration <-> shape  (default true)
     keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
+    coupling = "joint"            # poses and shape: "joint" (one Gauss-Newton on both) |
+                                  # "alternate" (the paper's fixed point)  (default "joint")
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
     max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
     prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
@@ -94,6 +96,7 @@ import numpy as np
 from fesdic_core.imaging.image import DEFAULT_ORDER, DEFAULT_PREFILTER_PX, ORDERS
 from fesdic_core.residual.edges import DEFAULT_EDGE_MARGIN_PX
 from fesdic_core.residual.visibility import DEFAULT_MAX_VIEW_ANGLE_DEG
+from fesdic_core.shape.joint import COUPLINGS
 
 from georeg_app.config.cad import RoughPose, cad_file, take_cad
 from georeg_app.config.roi import RoiConfig, take_roi
@@ -199,6 +202,7 @@ class MethodConfig:
     tikhonov_length_mm: tuple[float | str, ...] = DEFAULT_TIKHONOV_LENGTHS_MM
     calibrate: bool = True
     keep_stereo: bool = True
+    coupling: str = "joint"
     normalisation: str = "element"
     max_fixed_point: int = 10
     prefilter_px: float = DEFAULT_PREFILTER_PX
@@ -343,6 +347,7 @@ def method_table(data: Any, source: Path) -> MethodConfig:
                                   default=d.tikhonov_length_mm),
         calibrate=t.take("calibrate", boolean, "true or false", default=d.calibrate),
         keep_stereo=t.take("keep_stereo", boolean, "true or false", default=d.keep_stereo),
+        coupling=t.take("coupling", string, "a string", default=d.coupling),
         normalisation=t.take("normalisation", string, "a string", default=d.normalisation),
         max_fixed_point=t.take("max_fixed_point", integer, "an integer", default=d.max_fixed_point),
         prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
@@ -361,6 +366,8 @@ def method_table(data: Any, source: Path) -> MethodConfig:
            all(v == AUTO or v > 0 for v in m.tikhonov_length_mm), '> 0 or "auto"')
     check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
+    check(t, "coupling", m.coupling, m.coupling in COUPLINGS,
+          "one of " + ", ".join(map(json.dumps, COUPLINGS)))
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
     check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "edge_margin_px", m.edge_margin_px, m.edge_margin_px >= 0, ">= 0 (px; 0 = no margin)")

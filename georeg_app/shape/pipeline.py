@@ -209,6 +209,7 @@ def _measure_one(spec: MethodSpec, model: NominalModel, images, cameras, config:
     method = config.method
     settings = MeasurementSettings(scales=tuple(spec.scales), calibrate=method.calibrate,
                                    keep_stereo=method.keep_stereo,
+                                   coupling=method.coupling,
                                    normalisation=method.normalisation,
                                    max_fixed_point=method.max_fixed_point,
                                    edge_margin_px=method.edge_margin_px,
