@@ -14,7 +14,7 @@ fixed cameras, so the rows need no extrinsic derivative of the images: with
 
     dr/drvec_i = c . (dR0/drvec_i X),    dr/dt0 = c,
 
-i.e. ``G = [X x dr/dX, dr/dX] T`` with a constant ``T`` (6, 6) (:func:`_rig_motion`), so
+i.e. ``G = [X x dr/dX, dr/dX] T`` with a constant ``T`` (6, 6) (:func:`rig_motion`), so
 ``M = T^T (sum w u u^T) T`` from the moments ``u = [X x dr/dX, dr/dX]``; and the residual
 the calibration ends on carries ``dr/dX`` for the shape step that follows.
 
@@ -43,8 +43,8 @@ from fesdic_core.solve.damping import damped_step, relaxed
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CalibrationResult", "truncated_solve", "rigid_rig_gradients", "pose_normal_equations",
-           "calibrate_extrinsics"]
+__all__ = ["CalibrationResult", "truncated_solve", "rig_motion", "rigid_rig_gradients",
+           "pose_normal_equations", "calibrate_extrinsics"]
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ def _parameter_gradients(res: GrayLevelResidual, stereo_jacobian: np.ndarray | N
     return res.dr_dp
 
 
-def _rig_motion(camera0) -> np.ndarray:
+def rig_motion(camera0) -> np.ndarray:
     """``T`` (6, 6) with ``dr/dp0 = [X x dr/dX, dr/dX] T`` (module docstring).
 
     Rodrigues' derivative is ``dR0/drvec_i = [v_i]_x R0``, so with ``c = R0 dr/dX``
@@ -110,7 +110,7 @@ def _moments(dr_dX: np.ndarray, X: np.ndarray) -> np.ndarray:
 def rigid_rig_gradients(dr_dX: np.ndarray, X: np.ndarray, camera0) -> np.ndarray:
     """Rows ``G_g = dr_g/dp0`` (g, 6) of the stereo-kept calibration from ``dr/dX`` (g, 3):
     the rig's motion is the specimen's rigid motion (module docstring)."""
-    return _moments(dr_dX, X) @ _rig_motion(camera0)
+    return _moments(dr_dX, X) @ rig_motion(camera0)
 
 
 _ROWS = 1 << 12      # points per block of the normal equations: (6, rows) @ (rows, 6) stays
@@ -134,7 +134,7 @@ def pose_normal_equations(res: GrayLevelResidual, X: np.ndarray, cameras: Sequen
         M += G.T @ wG                                           # Gauss-Newton matrix of Eq. 6
         rhs -= wG.T @ res.r[rows]
     if stereo is not None:
-        T = _rig_motion(cameras[0])
+        T = rig_motion(cameras[0])
         M, rhs = T.T @ M @ T, T.T @ rhs
     return M, rhs
 

@@ -165,10 +165,11 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         if joint:                   # poses and shape in one Gauss-Newton (joint.py)
             out = joint_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
                                      stereo, node_weights, settings.normalisation,
-                                     settings.max_iter, settings.tol_mm * coarse,
+                                     settings.max_joint_iter, settings.tol_mm * coarse,
                                      settings.fixed_point_tol_px, residual_rtol=None if finest
                                      else settings.fixed_point_rtol, extra_mask=mask, log=log,
-                                     context={"fixed_point": 1}, start=first)
+                                     context={"fixed_point": 1}, start=first,
+                                     final_decrement=finest)
             q, cams = out.q, [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, out.cameras)]
             shape = ShapeResult(q=q, residual=out.residual, iterations=out.iterations,
                                 converged=out.converged, damping=out.damping, stop=out.stop)

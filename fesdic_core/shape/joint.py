@@ -52,7 +52,7 @@ from scipy.linalg import null_space
 from fesdic_core.cameras.rig import place_camera1
 from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
-from fesdic_core.shape.calibration import pose_normal_equations, rigid_rig_gradients
+from fesdic_core.shape.calibration import pose_normal_equations, rig_motion
 from fesdic_core.shape.gauge import (TANGENTIAL_RTOL, checked_weights, pose_directions,
                                      rigid_normal_modes, tangential_motions)
 from fesdic_core.shape.operators import (GaussNewtonLog, chi_square, current_nodes,
@@ -69,7 +69,7 @@ __all__ = ["COUPLINGS", "JointResult", "JointSystem", "normal_motions",
 
 #: a plain step that lowered the cost by more than this many times the linearised model's
 #: prediction is tried again twice as long, up to :data:`MAX_STRETCH` times (:func:`_stretched`)
-STRETCH_RATIO = 1.5
+STRETCH_RATIO = 1.25
 MAX_STRETCH = 8.0
 
 #: how the poses and the shape are solved: one joint Gauss-Newton, or the fixed point of
@@ -82,10 +82,12 @@ class JointResult:
     """End of a joint Gauss-Newton.
 
     ``cameras``: the final cameras (those given, moved); ``residual``: at the final state,
-    with ``dr_dX``; ``stop``: "step", "noise" (the plain step's predicted fall below one unit
-    of chi-square), "no descent", "residual", "no point seen" or "iteration limit";
-    ``decrement``: that predicted fall at the final state (chi-square units; NaN if the loop
-    ended before computing it).
+    with ``dr_dX``; ``stop``: "step" (the plain step moves nothing), "noise no step" (the plain
+    step's predicted fall is below one unit of chi-square; not taken), "noise" (the last
+    accepted step changed the cost by less than that), "no descent", "residual", "no point
+    seen" or "iteration limit"; ``decrement``: the plain step's predicted fall at the final
+    state (chi-square units: the gradient against its noise, ``b^T H^-1 b`` over the residual
+    variance per point; NaN if not computed, see ``final_decrement``).
     """
 
     q: np.ndarray
@@ -164,11 +166,18 @@ def point_derivative(res: GrayLevelResidual, cameras: Sequence) -> np.ndarray:
     return res.dr_dp[:, 3:6] @ cameras[0].R + res.dr_dp[:, 9:12] @ cameras[1].R
 
 
-def _pose_rows(res: GrayLevelResidual, X: np.ndarray, cameras: Sequence, stereo) -> np.ndarray:
-    """``G`` (g, k): ``dr/dp`` of camera 0 with camera 1 following (k = 6), or of both (12)."""
-    if stereo is not None:
-        return rigid_rig_gradients(res.dr_dX, X, cameras[0])
-    return res.dr_dp
+def _coupling(res: GrayLevelResidual, X: np.ndarray, quad: PixelQuadrature, normals: np.ndarray,
+              cameras: Sequence, stereo) -> np.ndarray:
+    """``H_qp`` (n, k): with camera 1 following camera 0, ``G = u T`` (the rig's motion is the
+    specimen's, :func:`~fesdic_core.shape.calibration.rigid_rig_gradients`), so
+    ``H_qp = (sum w phi u^T) T`` from the moments ``u = [X x dr/dX, dr/dX]``; else ``G = dr/dp``."""
+    if stereo is None:
+        return shape_pose_coupling(quad, normals, res, lambda points: res.dr_dp[points], 12)
+    dr_dX = res.dr_dX
+
+    def moments(points: slice) -> np.ndarray:
+        return np.concatenate([np.cross(X[points], dr_dX[points]), dr_dX[points]], axis=1)
+    return shape_pose_coupling(quad, normals, res, moments, 6) @ rig_motion(cameras[0])
 
 
 def joint_system(res: GrayLevelResidual, X: np.ndarray, quad: PixelQuadrature,
@@ -180,7 +189,7 @@ def joint_system(res: GrayLevelResidual, X: np.ndarray, quad: PixelQuadrature,
     w = np.where(res.mask, quad.weight_mm2, 0.0)
     H, b = shape_operators(quad, normals, res)                               # Eq. 8
     M, b_p = pose_normal_equations(res, X, cameras, stereo, w)               # Eq. 6
-    H_qp = shape_pose_coupling(quad, normals, res, _pose_rows(res, X, cameras, stereo))
+    H_qp = _coupling(res, X, quad, normals, cameras, stereo)
     keep_stereo = stereo is not None
     slides, centre = tangential_motions(nodes0, normals, node_weights)
     F = pose_directions(cameras, slides, centre, keep_stereo)
@@ -256,7 +265,8 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                        tol_px: float = 1e-2, max_damping: int = 8,
                        residual_rtol: float | None = None, extra_mask=None,
                        log: GaussNewtonLog | None = None, context: dict | None = None,
-                       start: GrayLevelResidual | None = None) -> JointResult:
+                       start: GrayLevelResidual | None = None,
+                       final_decrement: bool = False) -> JointResult:
     """Minimise Eq. 2 over the shape ``q`` and the poses from ``(q0, cameras)`` by the joint
     Gauss-Newton of the module docstring.
 
@@ -274,6 +284,8 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         fraction in a step (Remark 3)
     start : the residual at ``(q0, cameras)``, with ``dr_dX`` (``dr_dp`` too when ``stereo`` is
         None), if the caller has it
+    final_decrement : when the loop ends on an accepted step, assemble the system once more
+        at the final state for :attr:`JointResult.decrement` (no image evaluation)
     """
     jacobian = "point" if stereo is not None else "extrinsic"
 
@@ -303,7 +315,7 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         decrement = system.predicted_fall(dq, dp)
         shift = _shift_px(_moved(cams, dp, stereo), cams, probe)
         if (np.max(np.abs(dq), initial=0.0) < tol_mm and shift < tol_px) or abs(decrement) < 1.0:
-            converged, stop, it = True, "step" if abs(decrement) >= 1.0 else "noise", it - 1
+            converged, stop, it = True, "step" if abs(decrement) >= 1.0 else "noise no step", it - 1
             logger.debug("joint GN scale %d: the next step is stagnant (max|dq| %.2e mm, poses "
                          "%.2e px, predicted chi-square fall %.3g)", scale,
                          np.max(np.abs(dq), initial=0.0), shift, decrement)
@@ -345,9 +357,15 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
                      res.std_percent, np.max(np.abs(step_q), initial=0.0), shift, mu,
                      _fall(system.cost, chi_square(res, quad)), system.predicted_fall(step_q, step_p))
         mu = relaxed(mu)
+        if abs(_fall(system.cost, chi_square(res, quad))) < 1.0:
+            converged, stop = True, "noise"      # the data cannot tell the two states apart
+            break
         if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:
             converged, stop = True, "residual"
             break
+    if final_decrement and stop not in ("step", "noise no step", "no point seen"):
+        system = joint_system(res, X, quad, nodes0, normals, node_weights, cams, stereo)
+        decrement = system.predicted_fall(*joint_step(system, solver, q, scale))
     res = dataclasses.replace(res, dr_dp=None)
     return JointResult(q=q, cameras=tuple(cams), residual=res, iterations=it,
                        converged=converged, stop=stop, damping=mu, decrement=decrement)

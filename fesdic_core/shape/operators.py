@@ -75,17 +75,18 @@ def shape_operators(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelRe
 
 
 def shape_pose_coupling(quad: PixelQuadrature, normals: np.ndarray, res: GrayLevelResidual,
-                        G: np.ndarray) -> np.ndarray:
+                        rows: Callable[[slice], np.ndarray], k: int) -> np.ndarray:
     """The off-diagonal block ``H_qp = sum_g w_g phi_g G_g^T`` (n, k) of the joint Gauss-Newton
     system on the shape and the poses (:mod:`fesdic_core.shape.joint`).
 
-    ``phi_g`` as in :func:`shape_operators` (Eq. 8), ``G`` (g, k) the rows ``dr_g/dp`` of the
-    pose problem (Eq. 6, or any other per-point columns).
+    ``phi_g`` as in :func:`shape_operators` (Eq. 8); ``rows(points)`` the rows ``G_g`` (m, k)
+    of the pose problem (Eq. 6) at a slice of points, computed block by block (no (g, k)
+    array for the whole quadrature).
     """
     if res.dr_dX is None:
         raise ValueError("shape_pose_coupling: the residual has no dr/dX")
     w = np.where(res.mask, quad.weight_mm2, 0.0)
-    n, k = normals.shape[0], G.shape[1]
+    n = normals.shape[0]
     out = np.zeros((n, k))
     for group in quad.groups:
         E, (m, nn) = len(group.elements), group.N.shape
@@ -95,7 +96,7 @@ def shape_pose_coupling(quad: PixelQuadrature, normals: np.ndarray, res: GrayLev
             points = slice(group.start + span.start * m, group.start + span.stop * m)
             g = res.dr_dX[points].reshape(-1, m, 3)
             phi = (g @ normals[group.connectivity[span]].transpose(0, 2, 1)) * group.N
-            wG = (w[points, None] * G[points]).reshape(-1, m, k)
+            wG = (w[points, None] * rows(points)).reshape(-1, m, k)
             block[span] = phi.transpose(0, 2, 1) @ wG                        # (e, nn, k)
 
         for_each_block(element_block, E, max(1, _ELEMENT_BLOCK // m))

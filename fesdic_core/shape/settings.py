@@ -57,8 +57,9 @@ class MeasurementSettings:
     keep_stereo : when calibrating, keep the stereo relation of the initial cameras
         (6 unknowns) instead of freeing both cameras (12 unknowns).
     coupling : when calibrating, "joint" (one Gauss-Newton on the poses and the shape
-        together, :mod:`fesdic_core.shape.joint`) or "alternate" (the fixed point of section
-        2.2: calibration and shape in turn, ``max_fixed_point`` times at most).
+        together, :mod:`fesdic_core.shape.joint`, ``max_joint_iter`` iterations at most per
+        scale) or "alternate" (the fixed point of section 2.2: calibration and shape in turn,
+        ``max_fixed_point`` times at most, each Gauss-Newton ``max_iter`` iterations at most).
     consistency_factor : the final residual may be at most this many times the noise
         floor of the images (:data:`fesdic_core.imaging.noise.CONSISTENCY_FACTOR`).
     max_shape_fraction : the correction may reach at most this fraction of the mesh's
@@ -90,6 +91,7 @@ class MeasurementSettings:
     normalisation: str = "element"
     max_fixed_point: int = 10
     max_iter: int = 20
+    max_joint_iter: int = 50
     tol_mm: float = 1e-4
     fixed_point_tol_mm: float = 2e-3
     fixed_point_tol_px: float = 1e-2
