@@ -22,17 +22,22 @@ Step = TypeVar("Step", bound=tuple)
 
 
 def damped_step(propose: Callable[[float], Step | None], std_percent: float, mu: float,
-                max_damping: int) -> tuple[Step | None, float]:
+                max_damping: int,
+                cost: Callable[[object], float] | None = None) -> tuple[Step | None, float]:
     """First step of ``propose(mu)``, ``propose(10 mu)``, ... that does not raise the residual.
 
     ``propose(mu)`` returns a tuple whose last item is the residual at the step's end (a
     :class:`~fesdic_core.residual.graylevel.GrayLevelResidual`), or None for an unusable step.
+    ``cost(residual)``: what must not grow, and ``std_percent`` its value at the start
+    (default: the residual's ``std_percent``).
     Returns the accepted step and the ``mu`` it was taken with, or ``(None, mu)`` when
     ``max_damping`` increases did not find one (the state is stagnant).
     """
     for _ in range(max_damping + 1):
         step = propose(mu)
-        if step is not None and step[-1].std_percent <= std_percent * (1.0 + ACCEPT_RTOL):
+        value = None if step is None else (step[-1].std_percent if cost is None
+                                           else cost(step[-1]))
+        if value is not None and value <= std_percent * (1.0 + ACCEPT_RTOL):
             return step, mu
         mu = max(10.0 * mu, MU_START)
     return None, mu
