@@ -228,6 +228,8 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--scenes", default="demo,bump")
     parser.add_argument("--no-uncertainty", action="store_true")
+    parser.add_argument("--coupling", default="joint", choices=("joint", "alternate"),
+                        help="poses and shape: one joint Gauss-Newton, or the fixed point")
     parser.add_argument("--cache", type=Path, default=None,
                         help="folder where the rendered scenes are kept between runs (pickle)")
     args = parser.parse_args()
@@ -238,7 +240,7 @@ def main() -> None:
           f"numpy {np.__version__}, compiled kernel {COMPILED_KERNEL}")
     print(f"code: {Path(driver.__file__).parents[1]}")
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    settings = MeasurementSettings(scales=(2, 1, 0), calibrate=True,
+    settings = MeasurementSettings(scales=(2, 1, 0), calibrate=True, coupling=args.coupling,
                                    uncertainty=not args.no_uncertainty)
     for name in args.scenes.split(","):
         t = time.perf_counter()

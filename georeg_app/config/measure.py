@@ -57,12 +57,13 @@ A complete example (every key; optional keys show their default in parentheses):
     scales = 3                    # image scales, coarse to fine       (default 3)
     tikhonov_length_mm = [5.0, 10.0, 20.0, "auto"]   # numbers (mm) and/or "auto"
                                   # (chosen from the data)   (default [5, 10, 20, "auto"])
-    calibrate = true              # fixed point calibration <-> shape  (default true)
+    calibrate = true              # calibrate the poses with the shape (default true)
     keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
     coupling = "joint"            # poses and shape: "joint" (one Gauss-Newton on both) |
                                   # "alternate" (the paper's fixed point)  (default "joint")
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
-    max_fixed_point = 10          # fixed-point iterations per scale   (default 10)
+    max_fixed_point = 10          # fixed-point iterations per scale, coupling = "alternate"
+                                  #                                    (default 10)
     prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
                                   # B-spline, >= 0, 0 = none (default 0.5, the core's
                                   # fesdic_core.imaging.image.DEFAULT_PREFILTER_PX)

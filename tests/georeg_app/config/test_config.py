@@ -71,6 +71,7 @@ def test_good_config_loads_with_paths_resolved_against_its_folder(tmp_path, monk
     assert c.method.tikhonov_length_mm == (5.0, 10.5)
     assert c.method.scale_sequence == (2, 1, 0)
     assert c.method.keep_stereo is True and c.method.normalisation == "element"   # defaults
+    assert c.method.coupling == "joint"
     assert c.output.dir == sub / "results"
     assert c.source == path.resolve()
     assert c.with_output_dir(tmp_path / "o").output.dir == tmp_path / "o"

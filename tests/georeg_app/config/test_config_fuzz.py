@@ -19,6 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fesdic_core.shape.joint import COUPLINGS
 from georeg_app.config.measure import GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS, load_config
 from georeg_app.config.toml_schema import ConfigError
 
@@ -120,7 +121,7 @@ BAD = {
                        st.lists(_text.filter(lambda s: s != "block"), min_size=1, max_size=3)),
     "feature": st.one_of(_not_a_string, _text.filter(lambda s: s != "block")),
     **{f"enum:{','.join(c)}": _not_one_of(c) for c in (GEOMETRY_KINDS, METHOD_NAMES, NORMALISATIONS,
-                                                       challenge_config.FEATURE_KINDS)},
+                                                       COUPLINGS, challenge_config.FEATURE_KINDS)},
 }
 
 
@@ -213,7 +214,7 @@ _GEOMETRY = {"kind": "plate_with_hole", "length_mm": 100.0, "width_mm": 50.0,
              "hole_radius_mm": 14.0, "elements": 300}
 _METHOD = {"name": "georeg", "levels": 3, "start_levels": 3, "scales": 3,
            "tikhonov_length_mm": [5.0, 10.0], "calibrate": True, "keep_stereo": True,
-           "normalisation": "element", "max_fixed_point": 10, "prefilter_px": 0.5,
+           "coupling": "joint", "normalisation": "element", "max_fixed_point": 10, "prefilter_px": 0.5,
            "edge_margin_px": 2.0}
 _TOP_KEYS = {"images", "cameras", "landmarks", "geometry", "method", "output"}
 _COMMON_VALUES = {
@@ -226,6 +227,7 @@ _COMMON_VALUES = {
     ("method", "edge_margin_px"): "non_negative",
     ("method", "scales"): "count", ("method", "tikhonov_length_mm"): "positives_or_auto",
     ("method", "calibrate"): "boolean", ("method", "keep_stereo"): "boolean",
+    ("method", "coupling"): _enum(COUPLINGS),
     ("method", "normalisation"): _enum(NORMALISATIONS), ("method", "max_fixed_point"): "count",
     ("output", "dir"): "string"}
 _COMMON_REQUIRED = [("images",), ("images", "cam0"), ("images", "cam1"), ("cameras",),
