@@ -163,6 +163,20 @@ def measure(mesh: SurfaceMesh, images: Sequence[Image], cameras: Sequence,
         known: GrayLevelResidual | None = first   # the residual at the current state
         joint = settings.calibrate and settings.coupling == "joint"
         if joint:                   # poses and shape in one Gauss-Newton (joint.py)
+            if k == 1:              # from the landmarks' pose: the poses first, at the nominal
+                X = quad.points(nodes_now)                       # shape (section 2.2)
+                cal = calibrate_extrinsics(X, quad, imgs, scaled, stereo=stereo,
+                                           frozen=pose_directions(cams, slides, centre,
+                                                                  stereo is not None),
+                                           normalisation=settings.normalisation,
+                                           max_iter=settings.max_iter, extra_mask=mask,
+                                           tol_rad=1e-7 * coarse, tol_mm=1e-5 * coarse,
+                                           undamped_px=settings.fixed_point_tol_px, log=log,
+                                           context={"fixed_point": 0, "scale": scale},
+                                           start=first)
+                cams = [c.with_extrinsics(s.extrinsics) for c, s in zip(cams, cal.cameras)]
+                scaled = [c.scaled(scale) for c in cams]
+                first = cal.residual
             out = joint_gauss_newton(mesh.nodes, normals, q, quad, imgs, scaled, solver, scale,
                                      stereo, node_weights, settings.normalisation,
                                      settings.max_joint_iter, settings.tol_mm * coarse,

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 __all__ = ["TANGENTIAL_RTOL", "rigid_normal_modes", "checked_weights", "split_rigid_part",
+           "normal_motions", "normal_gauge",
            "move_cameras_with_specimen", "transfer_rigid_part", "tangential_motions",
            "pose_directions", "best_fit_plane_distance", "rigid_align"]
 
@@ -140,6 +141,37 @@ def pose_directions(cameras, motions: np.ndarray, centre: np.ndarray, keep_stere
         d = np.concatenate([(a.extrinsics - b.extrinsics) / (2 * step) for a, b in zip(plus, minus)])
         columns.append(d[:6] if keep_stereo else d)
     return np.array(columns).T.reshape(6 if keep_stereo else 12, -1)
+
+
+def normal_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motions ``[t, w]`` (6, k_n) that move the nodes along their normals, and the
+    centre they turn about.
+
+    Orthonormal in the nodal-area metric of their normal parts, with the scaling and the
+    tolerance of :func:`~fesdic_core.shape.gauge.split_rigid_part` (rotations times the
+    surface's radius; a singular value below :data:`TANGENTIAL_RTOL` of the largest is a slide,
+    :func:`~fesdic_core.shape.gauge.tangential_motions`): on a plane k_n = 3 (offset, two
+    tilts), on a cylinder 4, on a part of several faces 6.
+    """
+    w = checked_weights(node_weights, len(nodes))
+    modes, centre = rigid_normal_modes(nodes, normals)
+    radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=w)))
+    scale = np.r_[np.ones(3), np.full(3, radius)]
+    A = modes / scale * np.sqrt(w)[:, None]
+    A = np.vstack([A, np.zeros((max(0, 6 - len(A)), 6))])         # at least 6 rows
+    _, sv, vt = np.linalg.svd(A, full_matrices=False)
+    keep = sv > TANGENTIAL_RTOL * sv.max()
+    return (vt[keep] / sv[keep, None] / scale).T, centre
+
+
+def normal_gauge(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray) -> np.ndarray:
+    """``N`` (n, k_n): the gauge conditions ``N^T q = 0``: ``q`` keeps no rigid normal part (the
+    nodal-area weighted normal parts of :func:`normal_motions`, columns of unit norm)."""
+    motions, _ = normal_motions(nodes, normals, node_weights)
+    modes, _ = rigid_normal_modes(nodes, normals)
+    N = checked_weights(node_weights, len(nodes))[:, None] * (modes @ motions)
+    return N / np.linalg.norm(N, axis=0)
 
 
 def best_fit_plane_distance(points: np.ndarray) -> np.ndarray:

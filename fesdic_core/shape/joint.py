@@ -27,8 +27,8 @@ by the cameras changes neither image, so the cost is flat along it:
   no node along its normal: the poses keep them at their start (``dp = Z y``, ``Z`` orthogonal
   to their pose directions in Jacobi-scaled parameters, as the calibration's frozen ones);
 - the other rigid motions have a normal part ``N`` at the nodes that ``q`` could take: ``q`` is
-  kept orthogonal to it (``N^T (q + dq) = 0``, nodal-area weights; ``lam`` its Lagrange
-  multipliers). The poses own the rigid motion, as after the alternation's hand-over, but
+  kept orthogonal to it (``N^T (q + dq) = 0``, weighted by the area each node's elements
+  show the images, :func:`seen_areas`; ``lam`` its Lagrange multipliers). The poses own the rigid motion, as after the alternation's hand-over, but
   the condition holds inside the step instead of moving the state after it, which is not an
   exact symmetry on a part of several faces.
 
@@ -47,7 +47,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Sequence, cast
 
 import numpy as np
 from scipy.linalg import null_space
@@ -56,8 +56,7 @@ from fesdic_core.cameras.rig import place_camera1
 from fesdic_core.fe.quadrature import PixelQuadrature
 from fesdic_core.residual.graylevel import GrayLevelResidual, gray_level_residual
 from fesdic_core.shape.calibration import pose_normal_equations, rig_motion
-from fesdic_core.shape.gauge import (TANGENTIAL_RTOL, checked_weights, pose_directions,
-                                     rigid_normal_modes, tangential_motions)
+from fesdic_core.shape.gauge import normal_gauge, pose_directions, tangential_motions
 from fesdic_core.shape.operators import (GaussNewtonLog, chi_square, current_nodes,
                                          shape_operators, shape_pose_coupling)
 from fesdic_core.solve.damping import damped_step, relaxed
@@ -66,8 +65,7 @@ from fesdic_core.solve.solvers import FactorizeHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["COUPLINGS", "JointResult", "JointSystem", "normal_motions",
-           "normal_gauge", "point_derivative",
+__all__ = ["COUPLINGS", "JointResult", "JointSystem", "seen_areas", "point_derivative",
            "joint_system", "joint_step", "joint_gauss_newton"]
 
 #: a plain step that lowered the cost by more than this many times the linearised model's
@@ -127,37 +125,6 @@ class JointSystem:
         return float(fall) * n / c if c > 0.0 and n else float("inf")
 
 
-def normal_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The rigid motions ``[t, w]`` (6, k_n) that move the nodes along their normals, and the
-    centre they turn about.
-
-    Orthonormal in the nodal-area metric of their normal parts, with the scaling and the
-    tolerance of :func:`~fesdic_core.shape.gauge.split_rigid_part` (rotations times the
-    surface's radius; a singular value below :data:`TANGENTIAL_RTOL` of the largest is a slide,
-    :func:`~fesdic_core.shape.gauge.tangential_motions`): on a plane k_n = 3 (offset, two
-    tilts), on a cylinder 4, on a part of several faces 6.
-    """
-    w = checked_weights(node_weights, len(nodes))
-    modes, centre = rigid_normal_modes(nodes, normals)
-    radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=w)))
-    scale = np.r_[np.ones(3), np.full(3, radius)]
-    A = modes / scale * np.sqrt(w)[:, None]
-    A = np.vstack([A, np.zeros((max(0, 6 - len(A)), 6))])         # at least 6 rows
-    _, sv, vt = np.linalg.svd(A, full_matrices=False)
-    keep = sv > TANGENTIAL_RTOL * sv.max()
-    return (vt[keep] / sv[keep, None] / scale).T, centre
-
-
-def normal_gauge(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray) -> np.ndarray:
-    """``N`` (n, k_n): the gauge conditions ``N^T q = 0``: ``q`` keeps no rigid normal part (the
-    nodal-area weighted normal parts of :func:`normal_motions`, columns of unit norm)."""
-    motions, _ = normal_motions(nodes, normals, node_weights)
-    modes, _ = rigid_normal_modes(nodes, normals)
-    N = checked_weights(node_weights, len(nodes))[:, None] * (modes @ motions)
-    return N / np.linalg.norm(N, axis=0)
-
-
 def point_derivative(res: GrayLevelResidual, cameras: Sequence) -> np.ndarray:
     """``dr/dX`` (g, 3) from the extrinsic derivative ``dr/dp`` (g, 12).
 
@@ -174,9 +141,14 @@ def _coupling(res: GrayLevelResidual, X: np.ndarray, quad: PixelQuadrature, norm
     """``H_qp`` (n, k): with camera 1 following camera 0, ``G = u T`` (the rig's motion is the
     specimen's, :func:`~fesdic_core.shape.calibration.rigid_rig_gradients`), so
     ``H_qp = (sum w phi u^T) T`` from the moments ``u = [X x dr/dX, dr/dX]``; else ``G = dr/dp``."""
+    dr_dX, dr_dp = res.dr_dX, res.dr_dp
     if stereo is None:
-        return shape_pose_coupling(quad, normals, res, lambda points: res.dr_dp[points], 12)
-    dr_dX = res.dr_dX
+        if dr_dp is None:
+            raise ValueError("the joint system: the residual has no dr/dp")
+        extrinsic: np.ndarray = dr_dp
+        return shape_pose_coupling(quad, normals, res, lambda points: extrinsic[points], 12)
+    if dr_dX is None:
+        raise ValueError("the joint system: the residual has no dr/dX")
 
     def moments(points: slice) -> np.ndarray:
         return np.concatenate([np.cross(X[points], dr_dX[points]), dr_dX[points]], axis=1)
@@ -197,7 +169,27 @@ def joint_system(res: GrayLevelResidual, X: np.ndarray, quad: PixelQuadrature,
     slides, centre = tangential_motions(nodes0, normals, node_weights)
     F = pose_directions(cameras, slides, centre, keep_stereo)
     return JointSystem(H=H, b=b, M=M, b_p=b_p, H_qp=H_qp, F=F,
-                       N=normal_gauge(nodes0, normals, node_weights), cost=chi_square(res, quad))
+                       N=normal_gauge(nodes0, normals, seen_areas(quad, res.mask, len(nodes0))),
+                       cost=chi_square(res, quad))
+
+
+def seen_areas(quad: PixelQuadrature, mask: np.ndarray, n_nodes: int) -> np.ndarray:
+    """(n,) the area of the surface the residual sees around each node (mm^2): each element's
+    seen integration weights, shared equally among its nodes. The gauge's metric.
+
+    With nodal areas instead, a node that few points see could balance the condition
+    ``N^T q = 0`` almost for free: on the demo plate, plain FE took a 61 mm step at its
+    coarsest scale and diverged; on the Stereo DIC Challenge part the steps walked a valley of
+    rigid pose motions balanced by 0.1-1 mm at the weakly seen nodes.
+    """
+    out = np.zeros(n_nodes)
+    w = np.where(mask, quad.weight_mm2, 0.0)
+    for group in quad.groups:
+        E, (m, nn) = len(group.elements), group.N.shape
+        seen = w[group.start:group.start + E * m].reshape(E, m).sum(axis=1)
+        out += np.bincount(group.connectivity.ravel(), weights=np.repeat(seen / nn, nn),
+                           minlength=n_nodes)
+    return out
 
 
 def _shape_map(solver: StepSolver, H, scale: int, q: np.ndarray
@@ -303,9 +295,8 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
         return X, _with_point_derivative(res, cams, stereo)
 
     q, cams = np.asarray(q0, float).copy(), list(cameras)
-    needed = start is not None and start.dr_dX is not None and (stereo is not None
-                                                                or start.dr_dp is not None)
-    if needed:
+    if start is not None and start.dr_dX is not None and (stereo is not None
+                                                          or start.dr_dp is not None):
         X, res = quad.points(current_nodes(nodes0, normals, q)), \
             _with_point_derivative(start, cams, stereo)
     else:
@@ -344,7 +335,7 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
 
         # the cost that the Gauss-Newton model minimises (Eq. 2), not the residual's std
         accepted, mu = damped_step(propose, system.cost[0], mu, max_damping,
-                                   lambda r: chi_square(r, quad)[0])
+                                   lambda r: chi_square(cast(GrayLevelResidual, r), quad)[0])
         if accepted is None:
             converged, stop = True, "no descent"
             logger.debug("joint GN scale %d it %d: no damped step lowers the residual (%.4f%%)",

@@ -86,6 +86,7 @@ def shape_pose_coupling(quad: PixelQuadrature, normals: np.ndarray, res: GrayLev
     if res.dr_dX is None:
         raise ValueError("shape_pose_coupling: the residual has no dr/dX")
     w = np.where(res.mask, quad.weight_mm2, 0.0)
+    dr_dX = res.dr_dX
     n = normals.shape[0]
     out = np.zeros((n, k))
     for group in quad.groups:
@@ -94,7 +95,7 @@ def shape_pose_coupling(quad: PixelQuadrature, normals: np.ndarray, res: GrayLev
 
         def element_block(span: slice) -> None:
             points = slice(group.start + span.start * m, group.start + span.stop * m)
-            g = res.dr_dX[points].reshape(-1, m, 3)
+            g = dr_dX[points].reshape(-1, m, 3)
             phi = (g @ normals[group.connectivity[span]].transpose(0, 2, 1)) * group.N
             wG = (w[points, None] * rows(points)).reshape(-1, m, k)
             block[span] = phi.transpose(0, 2, 1) @ wG                        # (e, nn, k)

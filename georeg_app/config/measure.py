@@ -57,19 +57,15 @@ A complete example (every key; optional keys show their default in parentheses):
     scales = 3                    # image scales, coarse to fine       (default 3)
     tikhonov_length_mm = [5.0, 10.0, 20.0, "auto"]   # numbers (mm) and/or "auto"
                                   # (chosen from the data)   (default [5, 10, 20, "auto"])
-    calibrate = true              # calibrate the poses with the shape (default true)
-    keep_stereo = true            # calibrate the pose, keep the stereo relation (default true)
-    coupling = "joint"            # poses and shape: "joint" (one Gauss-Newton on both) |
-                                  # "alternate" (the paper's fixed point)  (default "joint")
+    calibrate = true              # calibrate the poses with the shape (default true),
+    keep_stereo = true            # keeping the stereo relation (default true)
+    coupling = "joint"            # "joint" (one Gauss-Newton) | "alternate" (fixed point)
     normalisation = "element"     # brightness/contrast: "element" | "global" | "none"
-    max_fixed_point = 10          # fixed-point iterations per scale, coupling = "alternate"
-                                  #                                    (default 10)
+    max_fixed_point = 10          # per scale, coupling = "alternate"  (default 10)
     prefilter_px = 0.5            # image model: Gaussian prefilter sigma (px) before the
-                                  # B-spline, >= 0, 0 = none (default 0.5, the core's
-                                  # fesdic_core.imaging.image.DEFAULT_PREFILTER_PX)
-    interpolation_order = 3       # image model: B-spline order of the interpolant after the
-                                  # prefilter, 3 (cubic) | 5 (quintic) (default 3, the core's
-                                  # fesdic_core.imaging.image.DEFAULT_ORDER)
+                                  # B-spline, >= 0, 0 = none (default 0.5, DEFAULT_PREFILTER_PX)
+    interpolation_order = 3       # image model: B-spline order after the prefilter, 3 (cubic)
+                                  # | 5 (quintic) (default 3, imaging.image.DEFAULT_ORDER)
     edge_margin_px = 2.0          # leave out the points within this many px of the mesh's
                                   # projected boundary, >= 0, 0 = none (default 2, the core's
                                   # fesdic_core.residual.edges.DEFAULT_EDGE_MARGIN_PX)
@@ -367,8 +363,7 @@ def method_table(data: Any, source: Path) -> MethodConfig:
            all(v == AUTO or v > 0 for v in m.tikhonov_length_mm), '> 0 or "auto"')
     check(t, "normalisation", m.normalisation, m.normalisation in NORMALISATIONS,
            "one of " + ", ".join(map(json.dumps, NORMALISATIONS)))
-    check(t, "coupling", m.coupling, m.coupling in COUPLINGS,
-          "one of " + ", ".join(map(json.dumps, COUPLINGS)))
+    check(t, "coupling", m.coupling, m.coupling in COUPLINGS, " or ".join(map(json.dumps, COUPLINGS)))
     check(t, "max_fixed_point", m.max_fixed_point, m.max_fixed_point >= 1, ">= 1")
     check(t, "prefilter_px", m.prefilter_px, m.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")
     check(t, "edge_margin_px", m.edge_margin_px, m.edge_margin_px >= 0, ">= 0 (px; 0 = no margin)")
