@@ -272,7 +272,8 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
     quad, images, cameras : the scale's quadrature, images and cameras (moved and returned)
     solver : the shape step's hook; scale : the image scale it is told
     stereo : (R, t) to keep (6 pose unknowns, camera 1 follows camera 0), or None (12)
-    node_weights : (n,) >= 0, nodal areas (the gauge's metric)
+    node_weights : (n,) >= 0, nodal areas (the metric of the slides; the rigid normal part is
+        weighed by the seen area, :func:`seen_areas`)
     tol_mm, tol_px : the plain step is stagnant when it moves no node by ``tol_mm`` and no
         point's image by ``tol_px`` (or predicts a fall below one unit of chi-square)
     max_damping : at most this many tenfold increases of the Levenberg-Marquardt factor after
