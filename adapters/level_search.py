@@ -12,10 +12,13 @@
    from its predicted optimum (the levels are nested, Eq. 13: no restart from scratch),
    its measured criterion decides, and the prediction is renewed from there. A level is
    iterated at most once.
-3. If another level was chosen: with calibration, one more fixed point of calibration and
-   shape at that level (the core's :func:`~fesdic_core.shape.driver.measure`); with fixed
-   cameras, the search's last Gauss-Newton is the measurement, and the core's
-   :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty.
+3. If another level was chosen: the search's last Gauss-Newton is the measurement, and the
+   core's :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty. With
+   calibration by the joint Gauss-Newton (``coupling = "joint"``), each level is iterated on
+   the poses and the shape together (:func:`~fesdic_core.shape.joint.joint_gauss_newton`), so
+   no second measurement is needed; with the fixed point (``"alternate"``), one more fixed
+   point of calibration and shape at that level (the core's
+   :func:`~fesdic_core.shape.driver.measure`).
 
 The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.shape.uncertainty`:
 image noise through the image model, scaled to the residual the FE model leaves), or the
@@ -33,9 +36,11 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from fesdic_core.fe.mesh import node_normals
+from fesdic_core.cameras.rig import stereo_transform
+from fesdic_core.fe.mesh import nodal_areas, node_normals
 from fesdic_core.imaging.image import pyramid
 from fesdic_core.shape.driver import Measurement, MeasurementSettings, conclude, measure
+from fesdic_core.shape.joint import joint_gauss_newton
 from fesdic_core.shape.operators import shape_gauss_newton
 from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.solve.solvers import seen_dofs
@@ -251,6 +256,8 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         return first, GeometricRegularization(space, schedule), LevelSearch(
             (), start, start, n_levels, float("nan"), 0.0)
     kappa = first.noise.variance
+    joint = settings.calibrate and settings.coupling == "joint"
+    stereo = stereo_transform(*first.cameras) if joint and settings.keep_stereo else None
     imgs = [p[finest] for p in (pyramid(im, finest + 1) for im in images)]
     cams = [c.scaled(finest) for c in first.cameras]
     quad, normals = first.quadrature, first.normals
@@ -290,12 +297,20 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         best = min(better, key=lambda t: t.criterion)              # the best predicted level
         visited.add(best.level)
         solver = GeometricRegularization(space, {finest: best.level})
-        shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad, imgs,
-                                   cams, solver, finest, settings.normalisation, settings.max_iter,
-                                   settings.tol_mm * 2.0 ** finest, extra_mask=mask,
-                                   keep_derivative=True)
+        if joint:            # the poses move with the shape: no second measurement at the end
+            shape = joint_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad,
+                                       imgs, cams, solver, finest, stereo, nodal_areas(model.mesh),
+                                       settings.normalisation, settings.max_joint_iter,
+                                       settings.tol_mm * 2.0 ** finest,
+                                       settings.fixed_point_tol_px, extra_mask=mask)
+        else:
+            shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad,
+                                       imgs, cams, solver, finest, settings.normalisation,
+                                       settings.max_iter, settings.tol_mm * 2.0 ** finest,
+                                       extra_mask=mask, keep_derivative=True)
         iterations += shape.iterations
-        trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
+        trial_cams = list(shape.cameras) if joint else cams
+        trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, trial_cams,
                                        settings.normalisation, mask, residual=shape.residual)
         measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
                           trial_state.residual.std_percent, True, trial_state.n_points,
@@ -306,14 +321,16 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         if measured.criterion >= current.criterion:
             break
         level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
+        cams = trial_cams
     solver = GeometricRegularization(space, {finest: level})
-    if level != start and not settings.calibrate:
-        # the cameras are fixed: the search's last Gauss-Newton is the measurement at the
-        # chosen level; the verdict and the uncertainty are the core's (conclude)
+    if level != start and (joint or not settings.calibrate):
+        # the cameras are fixed, or moved by the joint steps: the search's last Gauss-Newton is
+        # the measurement at the chosen level; the verdict and the uncertainty are the core's
         report = dataclasses.replace(first.scales[-1], residual_percent=kept.residual.std_percent,
                                      shape_converged=kept.converged,
                                      n_points=int(kept.residual.mask.sum()))
-        final = conclude(model.mesh, imgs, first.cameras, solver, settings, q, quad, normals,
+        full = [c.with_extrinsics(s.extrinsics) for c, s in zip(first.cameras, cams)]
+        final = conclude(model.mesh, imgs, full, solver, settings, q, quad, normals,
                          kept.residual, first.scales[:-1] + (report,), first.noise.sigma_gray,
                          mask=mask, final=kept.residual, history=first.history,
                          iterations=first.iterations + iterations,
