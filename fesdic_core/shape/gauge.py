@@ -120,15 +120,23 @@ def tangential_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.
     normal, so the gray levels cannot see them (k = 3 on a plane, 2 on a cylinder).
     """
     rtol = TANGENTIAL_RTOL if rtol is None else rtol
+    sv, vt, scale, centre = _rigid_svd(nodes, normals, node_weights)
+    return (vt[sv <= rtol * sv.max()] / scale).T, centre
+
+
+def _rigid_svd(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """SVD ``(sv (6,), vt (6, 6))`` of the weighted rigid normal modes, with the scaling of the
+    motions (metres and radians on a comparable footing: rotations times the surface radius)
+    and the centre they turn about."""
     node_weights = checked_weights(node_weights, len(nodes))
     modes, centre = rigid_normal_modes(nodes, normals)
-    # metres and radians on a comparable footing: rotations times the surface radius
     radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=node_weights)))
     scale = np.r_[np.ones(3), np.full(3, radius)]
     A = modes / scale * np.sqrt(node_weights)[:, None]
     A = np.vstack([A, np.zeros((max(0, 6 - len(A)), 6))])        # at least 6 rows: vt is 6 x 6
     _, sv, vt = np.linalg.svd(A, full_matrices=False)
-    return (vt[sv <= rtol * sv.max()] / scale).T, centre
+    return sv, vt, scale, centre
 
 
 def pose_directions(cameras, motions: np.ndarray, centre: np.ndarray, keep_stereo: bool,
@@ -146,28 +154,19 @@ def pose_directions(cameras, motions: np.ndarray, centre: np.ndarray, keep_stere
 def normal_motions(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray]:
     """The rigid motions ``[t, w]`` (6, k_n) that move the nodes along their normals, and the
-    centre they turn about.
-
-    Orthonormal in the nodal-area metric of their normal parts, with the scaling and the
-    tolerance of :func:`~fesdic_core.shape.gauge.split_rigid_part` (rotations times the
-    surface's radius; a singular value below :data:`TANGENTIAL_RTOL` of the largest is a slide,
-    :func:`~fesdic_core.shape.gauge.tangential_motions`): on a plane k_n = 3 (offset, two
-    tilts), on a cylinder 4, on a part of several faces 6.
+    centre they turn about: the complement of :func:`tangential_motions` (same scaling and
+    tolerance), orthonormal in the ``node_weights`` metric of their normal parts. On a plane
+    k_n = 3 (offset, two tilts), on a cylinder 4, on a part of several faces 6.
     """
-    w = checked_weights(node_weights, len(nodes))
-    modes, centre = rigid_normal_modes(nodes, normals)
-    radius = float(np.sqrt(np.average(np.sum((nodes - centre) ** 2, axis=1), weights=w)))
-    scale = np.r_[np.ones(3), np.full(3, radius)]
-    A = modes / scale * np.sqrt(w)[:, None]
-    A = np.vstack([A, np.zeros((max(0, 6 - len(A)), 6))])         # at least 6 rows
-    _, sv, vt = np.linalg.svd(A, full_matrices=False)
+    sv, vt, scale, centre = _rigid_svd(nodes, normals, node_weights)
     keep = sv > TANGENTIAL_RTOL * sv.max()
     return (vt[keep] / sv[keep, None] / scale).T, centre
 
 
 def normal_gauge(nodes: np.ndarray, normals: np.ndarray, node_weights: np.ndarray) -> np.ndarray:
-    """``N`` (n, k_n): the gauge conditions ``N^T q = 0``: ``q`` keeps no rigid normal part (the
-    nodal-area weighted normal parts of :func:`normal_motions`, columns of unit norm)."""
+    """``N`` (n, k_n): the gauge conditions ``N^T q = 0``: ``q`` keeps no rigid normal part
+    (the ``node_weights``-weighted normal parts of :func:`normal_motions`, columns of unit
+    norm; the joint Gauss-Newton weighs by the seen area, :func:`fesdic_core.shape.joint.seen_areas`)."""
     motions, _ = normal_motions(nodes, normals, node_weights)
     modes, _ = rigid_normal_modes(nodes, normals)
     N = checked_weights(node_weights, len(nodes))[:, None] * (modes @ motions)

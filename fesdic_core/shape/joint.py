@@ -354,12 +354,13 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
             log.add(**(context or {}), scale=scale, stage="joint", iteration=it,
                     residual_percent=res.std_percent, step=float(np.max(np.abs(step_q), initial=0)),
                     shift_px=shift, damping=mu, n_points=int(res.mask.sum()))
+        fall = _fall(system.cost, chi_square(res, quad))
         logger.debug("joint GN scale %d it %d: residual %.4f%% -> %.4f%%, max|dq| %.2e mm, poses "
                      "%.2e px, mu %.1e, chi-square fall %.4g (predicted %.4g)", scale, it, std,
-                     res.std_percent, np.max(np.abs(step_q), initial=0.0), shift, mu,
-                     _fall(system.cost, chi_square(res, quad)), system.predicted_fall(step_q, step_p))
+                     res.std_percent, np.max(np.abs(step_q), initial=0.0), shift, mu, fall,
+                     system.predicted_fall(step_q, step_p))
         mu = relaxed(mu)
-        if abs(_fall(system.cost, chi_square(res, quad))) < 1.0:
+        if abs(fall) < 1.0:
             converged, stop = True, "noise"      # the data cannot tell the two states apart
             break
         if residual_rtol is not None and std - res.std_percent <= residual_rtol * std:

@@ -29,8 +29,9 @@ from fesdic_core.solve.solvers import StepSolver
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["current_nodes", "shape_operators", "shape_pose_coupling", "GaussNewtonLog", "ShapeResult", "chi_square",
-           "chi_square_change", "predicted_chi_square_change", "shape_gauss_newton"]
+__all__ = ["current_nodes", "shape_operators", "shape_pose_coupling", "GaussNewtonLog",
+           "ShapeResult", "chi_square", "chi_square_change", "predicted_chi_square_change",
+           "shape_gauss_newton"]
 
 _ELEMENT_BLOCK = 1 << 15     # integration points per block of elements in the assembly
 
