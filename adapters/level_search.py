@@ -11,7 +11,10 @@
    fit noise, as on a flat plate); the level of lowest predicted criterion is iterated
    from its predicted optimum (the levels are nested, Eq. 13: no restart from scratch),
    its measured criterion decides, and the prediction is renewed from there. A level is
-   iterated at most once.
+   iterated at most once. Below the nominal spline, the search also looks at the bilinear
+   level of its parameter domain (:func:`~georeg_plugin.spline.refine.linear_patch`: nested
+   in every level, 4 dofs of which 3 are the rigid normal motions of a plane), so that a
+   flat specimen is not left with the biquadratic nominal's 6 other dofs of noise.
 3. If another level was chosen: the search's last Gauss-Newton is the measurement, and the
    core's :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty. With
    calibration by the joint Gauss-Newton (``coupling = "joint"``), each level is iterated on
@@ -45,19 +48,19 @@ from fesdic_core.shape.operators import shape_gauss_newton
 from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.multipatch import part_space
-from georeg_plugin.levels.operators import MultilevelSpace, nested_space
+from georeg_plugin.levels.operators import MultilevelSpace, gluing_matrix, nested_space
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
                                             penalty_per_dof, predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
 from georeg_plugin.levels.support import ZERO_PIVOT, mesh_seen
-from georeg_plugin.spline.refine import insert_knots, refine_uniform
+from georeg_plugin.spline.refine import insert_knots, linear_patch, refine_uniform
 
 from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
                                   scalar_holds_rigid_motions)
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LevelSearch", "ladder", "measure_auto_levels", "seen_level_dofs"]
+__all__ = ["LevelSearch", "below_nominal", "ladder", "measure_auto_levels", "seen_level_dofs"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,7 +118,8 @@ def part_levels(model: NominalModel) -> int:
     return 1 + max(0, int(np.floor(np.log(min(ratios)) / np.log(4.0) + 1e-9)))
 
 
-def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
+def ladder(model: NominalModel, curved: bool | None = None,
+           linear: bool = False) -> MultilevelSpace:
     """The nested levels from the nominal spline to the spline of the FE mesh (``C_FE``).
 
     From the spline whose knot spans are the FE elements (Eq. 17) down: each coarser level
@@ -131,6 +135,10 @@ def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
     ``curved``: the formulation, as :func:`~adapters.fesdic_core.multilevel_for_mesh`'s; None
     (default): scalar on a flat face or one whose scalar space holds the rigid normal motions
     (a cylinder), else the vector formulation.
+
+    ``linear``: one more level below the nominal, the bilinear patch of its parameter domain
+    (:func:`~georeg_plugin.spline.refine.linear_patch`), where the nominal is a single open
+    B-spline patch of degree above 1 and the formulation is scalar; see :func:`below_nominal`.
     """
     if model.is_part:                      # several faces: dyadic levels of every face
         return part_space(model.faces, part_levels(model), model.uv, model.node_face,
@@ -162,9 +170,28 @@ def ladder(model: NominalModel, curved: bool | None = None) -> MultilevelSpace:
     if curved is None:                     # as multilevel_for_mesh: scalar on a flat face or
         curved = is_curved(model) and not scalar_holds_rigid_motions(model, space)  # a cylinder
     if not curved:
+        if linear and _has_linear_level(model):
+            bilinear, C_r = linear_patch(model.patch)
+            space = nested_space([bilinear] + patches, [C_r] + refinements, model.mesh.nodes,
+                                 None, model.uv, family=family)
         return space
     return nested_space(patches, refinements, model.mesh.nodes, node_normals(model.mesh),
                         model.uv, family=family)
+
+
+def _has_linear_level(model: NominalModel) -> bool:
+    patch = model.patch
+    gluing = gluing_matrix(patch)
+    return (patch.weights is None and max(patch.degrees) > 1
+            and gluing.shape[0] == gluing.shape[1])                   # open: no seam to glue
+
+
+def below_nominal(space: MultilevelSpace, model: NominalModel) -> int:
+    """Levels of ``space`` below the nominal spline: 1 if :func:`ladder` added the bilinear
+    level (``ladder(..., linear=True)``), else 0."""
+    if model.is_part:
+        return 0
+    return int(space.patch(space.n_levels - 1).degrees != model.patch.degrees)
 
 
 def seen_level_dofs(space: MultilevelSpace, level: int, H=None) -> int:
@@ -243,11 +270,12 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     (measurement, solver, search): the measurement at the chosen level, the solve hook
     whose finest scale uses it, and the search's record.
     """
-    space = ladder(model, curved)
+    space = ladder(model, curved, linear=True)
     n_levels = space.n_levels
+    nominal = n_levels - 1 - below_nominal(space, model)     # the start never goes below it
     finest = settings.scales[-1]
-    start = max(0, n_levels - int(start_levels))
-    schedule = {s: min(start + s - finest, n_levels - 1) for s in settings.scales}
+    start = max(0, nominal + 1 - int(start_levels))
+    schedule = {s: min(start + s - finest, nominal) for s in settings.scales}
     first = measure(model.mesh, images, cameras, GeometricRegularization(space, schedule),
                     settings, progress=progress)
     t0 = time.perf_counter()

@@ -8,7 +8,7 @@ from georeg_plugin.spline.fe_mesh import (SplineFEMesh, fe_mesh_from_spline, che
 from georeg_plugin.spline.geometries import (rectangle, plate_with_hole, cylinder,
                                              arc_control_points, quadrilateral, transformed)
 from georeg_plugin.spline.patch import SplinePatch, invert_points
-from georeg_plugin.spline.refine import insert_knots, refine_uniform, refine_to_elements, midpoints
+from georeg_plugin.spline.refine import insert_knots, refine_uniform, refine_to_elements, midpoints, linear_patch
 from georeg_plugin.spline.trimmed import inside_loops, trim_mesh, grid_triangles, FOOTPRINT_SHRINK
 
 __all__ = ["validate_knots", "n_functions", "basis_matrix", "compact_basis", "greville",
@@ -16,5 +16,5 @@ __all__ = ["validate_knots", "n_functions", "basis_matrix", "compact_basis", "gr
            "fe_mesh_from_spline", "check_element_degree", "ELEMENT_DEGREES", "ElementDegreeError",
            "rectangle", "plate_with_hole", "cylinder", "arc_control_points", "quadrilateral",
            "transformed", "SplinePatch", "invert_points", "insert_knots", "refine_uniform",
-           "refine_to_elements", "midpoints", "inside_loops", "trim_mesh", "grid_triangles",
+           "refine_to_elements", "midpoints", "linear_patch", "inside_loops", "trim_mesh", "grid_triangles",
            "FOOTPRINT_SHRINK"]

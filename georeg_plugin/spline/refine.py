@@ -29,7 +29,7 @@ from georeg_plugin.spline.patch import SplinePatch
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["insert_knots", "refine_uniform", "refine_to_elements", "midpoints"]
+__all__ = ["insert_knots", "refine_uniform", "refine_to_elements", "midpoints", "linear_patch"]
 
 
 def insert_knots(patch: SplinePatch, new_u=(), new_v=()) -> tuple[SplinePatch, sp.csr_matrix]:
@@ -129,3 +129,36 @@ def refine_to_elements(patch: SplinePatch, n_u: int,
                  for s, c in enumerate(counts)]
         new.append(np.concatenate(knots) if knots else np.empty(0))
     return insert_knots(patch, new[0], new[1])
+
+
+def linear_patch(patch: SplinePatch) -> tuple[SplinePatch, sp.csr_matrix]:
+    """The bilinear patch on the parameter domain of a B-spline ``patch``, and its ``C_r``.
+
+    A bilinear polynomial in ``(u, v)`` lies in every B-spline space of degree >= 1 on the
+    same domain, so the bilinear patch is a level nested in ``patch`` (degree elevation
+    and knot insertion together, Eq. 13): ``R_lin = C_r R`` holds exactly. Its 4 control
+    points are the corners of ``patch``. A NURBS patch has no such level (``u v W`` is not
+    in its rational space) and raises ValueError.
+
+    Returns
+    -------
+    linear : SplinePatch, degrees (1, 1), one element, 2 x 2 control points.
+    C_r : csr_matrix (4, n_dofs of ``patch``) with ``R_lin = C_r R`` (Eq. 13).
+    """
+    if patch.weights is not None:
+        raise ValueError("linear_patch: a NURBS patch has no bilinear level nested in it")
+    (tu, tv) = patch.knots
+    ends = [np.array([t[0], t[0], t[-1], t[-1]], dtype=float) for t in (tu, tv)]
+    corners = patch.evaluate(np.array([[u, v] for u in ends[0][1:3] for v in ends[1][1:3]]))
+    linear = SplinePatch((1, 1), (ends[0], ends[1]), corners.reshape(2, 2, 3))
+    uv = np.stack(np.meshgrid(np.linspace(tu[0], tu[-1], 2 * patch.shape[0] + 3),
+                              np.linspace(tv[0], tv[-1], 2 * patch.shape[1] + 3),
+                              indexing="ij"), axis=-1).reshape(-1, 2)
+    B, B_lin = patch.basis(uv).toarray(), linear.basis(uv).toarray()
+    C_t, *_ = np.linalg.lstsq(B, B_lin, rcond=None)            # B C_r^T = B_lin
+    misfit = float(np.abs(B @ C_t - B_lin).max())
+    if misfit > 1e-9:                                          # cannot happen for a B-spline
+        raise ValueError(f"linear_patch: the bilinear basis is not in the patch's space "
+                         f"(misfit {misfit:.3g})")
+    C_t[np.abs(C_t) < 1e-12] = 0.0
+    return linear, sp.csr_matrix(C_t.T)

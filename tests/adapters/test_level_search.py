@@ -4,7 +4,7 @@ import pytest
 import scipy.sparse as sps
 
 from adapters.fesdic_core import multilevel_for_mesh, nominal_model
-from adapters.level_search import _move_to, ladder
+from adapters.level_search import _move_to, below_nominal, ladder
 from georeg_plugin.levels.selection import (information_criterion, noise_gain, penalty_per_dof,
                                             predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
@@ -40,6 +40,27 @@ def test_ladder_ends_on_the_spline_of_a_non_dyadic_mesh():
     q = 0.01 * x * y + 0.002 * x ** 2
     solver = GeometricRegularization(space)
     assert np.max(np.abs(solver.to_nodes(solver.control_values(q, 0), 0) - q)) < 1e-10
+
+
+def test_the_search_ladder_has_a_bilinear_level_below_the_nominal():
+    """``linear=True``: the same levels plus one below the nominal, the bilinear patch (4
+    dofs), nested in the nominal (C_lin = C_r C_nominal, Eq. 28) and holding a plane's
+    rigid normal motions (1, x, y) at the nodes; none below a NURBS nominal."""
+    model = nominal_model(rectangle(60.0, 40.0), (24, 16), "Q9")
+    plain, space = ladder(model), ladder(model, linear=True)
+    assert space.n_levels == plain.n_levels + 1 and below_nominal(space, model) == 1
+    assert below_nominal(plain, model) == 0
+    for C, D in zip(space.operators, plain.operators):
+        assert abs(C - D).max() < 1e-12
+    coarsest = space.operators[-1]
+    assert coarsest.shape[0] == 4
+    assert abs(space.refinement[-1] @ space.operators[-2] - coarsest).max() < 1e-12
+    x, y = model.mesh.nodes[:, 0], model.mesh.nodes[:, 1]
+    for q in (np.ones_like(x), x, y):
+        a, *_ = np.linalg.lstsq(coarsest.T.toarray(), q, rcond=None)
+        assert np.abs(coarsest.T @ a - q).max() < 1e-9
+    hole = nominal_model(plate_with_hole(100.0, 50.0, 14.0), 1, "Q9")
+    assert ladder(hole, linear=True).n_levels == ladder(hole).n_levels
 
 
 def test_predicted_fit_is_exact_for_a_linear_problem():

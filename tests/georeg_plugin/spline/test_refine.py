@@ -6,7 +6,8 @@ from hypothesis import strategies as st
 
 from georeg_plugin.spline.geometries import plate_with_hole
 from georeg_plugin.spline.patch import SplinePatch
-from georeg_plugin.spline.refine import insert_knots, refine_to_elements, refine_uniform
+from georeg_plugin.spline.refine import (insert_knots, linear_patch, refine_to_elements,
+                                         refine_uniform)
 
 
 def random_patch(rng, pu, pv, rational):
@@ -91,3 +92,28 @@ def test_bad_insertions_name_the_direction():
         insert_knots(coarse, (), [1.2])
     with pytest.raises(ValueError, match="times"):
         refine_uniform(coarse, -1)
+
+
+@pytest.mark.parametrize("pu, pv", [(2, 2), (3, 2), (2, 1)])
+def test_linear_patch_is_nested_in_every_b_spline(pu, pv):
+    """The bilinear patch's basis is the patch's basis times C_r at random points (Eq. 13),
+    its corners are the patch's corners, and C_r^T reproduces any bilinear function's
+    control values (a plane through the dofs of the finer patch)."""
+    rng = np.random.default_rng(pu * 10 + pv)
+    patch = random_patch(rng, pu, pv, rational=False)
+    linear, C_r = linear_patch(patch)
+    assert linear.degrees == (1, 1) and C_r.shape == (4, patch.n_dofs)
+    uv = rng.uniform(0, 1, (300, 2))
+    np.testing.assert_allclose(linear.basis(uv).toarray(), (C_r @ patch.basis(uv).toarray().T).T,
+                               atol=1e-11)
+    corners = np.array([[0, 0], [0, 1], [1, 0], [1, 1.0]])
+    np.testing.assert_allclose(linear.evaluate(corners), patch.evaluate(corners), atol=1e-12)
+    a = rng.normal(size=4)                               # f = a0 + a1 u + a2 v + a3 u v
+    f_fine = patch.basis(uv).toarray() @ (C_r.T @ a)
+    assert np.allclose(f_fine, linear.basis(uv).toarray() @ a, atol=1e-11)
+
+
+def test_linear_patch_refuses_nurbs():
+    patch = random_patch(np.random.default_rng(0), 2, 2, rational=True)
+    with pytest.raises(ValueError, match="NURBS"):
+        linear_patch(patch)
