@@ -48,7 +48,9 @@ class DisplacementSettings:
         images at the reference points, so ``H`` is built and factorized once per scale and
         serves every iteration of every frame; "current": the full Gauss-Newton, the
         deformed images' Jacobian at the current state, ``H`` rebuilt at every iteration.
-        Both minimise the same residual (same solution); only the convergence path differs.
+        With "reference" the full Gauss-Newton goes on at the finest scale from the modified
+        one's end (the modified one's fixed point is the residual's minimum only at small
+        displacement gradients; :mod:`fesdic_core.displacement.driver`).
     max_invalid_share : fail when more than this share of the seen nodes fail their local checks
         (:mod:`fesdic_core.displacement.validity`; default measured in :mod:`~fesdic_core.residual.validity`).
     """

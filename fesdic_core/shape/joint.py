@@ -60,18 +60,13 @@ from fesdic_core.shape.gauge import normal_gauge, pose_directions, tangential_mo
 from fesdic_core.shape.operators import (GaussNewtonLog, chi_square, current_nodes,
                                          shape_operators, shape_pose_coupling)
 from fesdic_core.solve.damping import damped_step, relaxed
-from fesdic_core.solve.gauss_newton import damped
+from fesdic_core.solve.gauss_newton import STRETCH_RATIO, damped, stretch_factor
 from fesdic_core.solve.solvers import FactorizeHook, StepSolver
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["COUPLINGS", "JointResult", "JointSystem", "seen_areas", "point_derivative",
            "joint_system", "joint_step", "joint_gauss_newton"]
-
-#: a plain step that lowered the cost by more than this many times the linearised model's
-#: prediction is stretched along itself, up to :data:`MAX_STRETCH` times (:func:`_stretched`)
-STRETCH_RATIO = 1.25
-MAX_STRETCH = 8.0
 
 #: how the poses and the shape are solved: one joint Gauss-Newton, or the fixed point of
 #: section 2.2 (calibration and shape in turn)
@@ -377,23 +372,21 @@ def joint_gauss_newton(nodes0: np.ndarray, normals: np.ndarray, q0: np.ndarray,
 def _stretched(system: JointSystem, step: tuple, moved: list, X: np.ndarray,
                res: GrayLevelResidual, at: Callable, quad: PixelQuadrature) -> tuple:
     """The accepted plain step, stretched along itself to the minimum of the cost's parabola
-    when it fell by more than :data:`STRETCH_RATIO` times what the linearised model predicted.
+    when it fell by more than :data:`~fesdic_core.solve.gauss_newton.STRETCH_RATIO` times what the
+    linearised model predicted.
 
     The Gauss-Newton model leaves out ``sum_g w_g r_g d^2 r_g``; where the misfit is the image
     model's (not noise), along the valley that the poses and the shape trade in, the cost falls
     past the Gauss-Newton step (measured: 2 to 2.5 times the predicted fall, step after step, on
     the Stereo DIC Challenge part and on a plate with both cameras free). Along the step ``f d``
-    the cost is ``c(f) = c0 - 2 f g + k f^2`` with the exact slope ``g = d . [b, b_p]`` and ``k``
-    from the fall measured at ``f = 1``; its minimum ``f = g / k`` (at most
-    :data:`MAX_STRETCH`; ``k <= 0``: the largest) is evaluated once and kept if the cost is
-    lower there. ``at(f)``: the cameras, points and residual at ``f`` times the step.
+    the cost is a parabola with the exact slope ``g = d . [b, b_p]`` and the fall measured at
+    ``f = 1`` (:func:`~fesdic_core.solve.gauss_newton.stretch_factor`); its minimum is
+    evaluated once and kept if the cost is lower there. ``at(f)``: the cameras, points and residual at ``f`` times the step.
     """
     c0, c1 = system.cost[0], chi_square(res, quad)[0]
     if not _fall(system.cost, (c1, 0)) > STRETCH_RATIO * system.predicted_fall(*step) > 0.0:
         return step, moved, X, res
-    g = float(step[0] @ system.b + step[1] @ system.b_p)
-    k = (c1 - c0) + 2.0 * g
-    f = MAX_STRETCH if k <= 0.0 else min(MAX_STRETCH, g / k)
+    f = stretch_factor(c0, c1, float(step[0] @ system.b + step[1] @ system.b_p))
     if f <= STRETCH_RATIO:
         return step, moved, X, res
     moved_f, X_f, res_f = at(f)

@@ -16,6 +16,13 @@ iteration that would only have confirmed it costs no residual evaluation. ``resi
 (a coarse scale, which only starts the next, Remark 3) also stops it when the residual
 falls by less than that fraction in a step.
 
+With ``stretch``, an accepted plain step that lowered the cost by more than
+:data:`STRETCH_RATIO` times the linearised model's prediction is stretched along itself to
+the minimum of the cost's parabola (:func:`stretch_factor`), evaluated once and kept if the
+cost is lower there: where the Gauss-Newton model overestimates the curvature (it leaves
+out the residual's second derivatives), the steps fall short along one direction, step
+after step.
+
 The Levenberg-Marquardt matrices ``H + mu diag H`` are kept per ``mu`` while ``H`` is the
 same object, so that a step solver that caches its factorization on the matrix
 (:class:`~fesdic_core.solve.solvers.CachedFactorization`, the displacement's modified
@@ -34,7 +41,13 @@ from fesdic_core.solve.damping import damped_step, relaxed
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["GaussNewtonOutcome", "damped", "predicted_change", "damped_gauss_newton"]
+__all__ = ["GaussNewtonOutcome", "damped", "predicted_change", "damped_gauss_newton",
+           "stretch_factor", "STRETCH_RATIO", "MAX_STRETCH"]
+
+#: a plain step that lowered the cost by more than this many times the linearised model's
+#: prediction is stretched along itself, up to :data:`MAX_STRETCH` times (:func:`stretch_factor`)
+STRETCH_RATIO = 1.25
+MAX_STRETCH = 8.0
 
 
 @dataclass(frozen=True)
@@ -69,11 +82,23 @@ def predicted_change(H, b: np.ndarray, d: np.ndarray, cost: tuple[float, int]) -
     return fall * n / c if c > 0.0 and n else float("inf")
 
 
+def stretch_factor(c0: float, c1: float, g: float) -> float:
+    """The factor ``f`` of a step ``d`` at the minimum of the cost's parabola along it.
+
+    Along ``f d`` the cost is ``c(f) = c0 - 2 f g + k f^2`` with the exact slope ``g = d . b``
+    (``b = -sum w phi r``, Eq. 8) and ``k = c1 - c0 + 2 g`` from the cost ``c1`` measured at
+    ``f = 1``; its minimum is ``f = g / k``, at most :data:`MAX_STRETCH` (``k <= 0``: the
+    largest). A factor at most :data:`STRETCH_RATIO` means: keep the step.
+    """
+    k = (c1 - c0) + 2.0 * g
+    return MAX_STRETCH if k <= 0.0 else min(MAX_STRETCH, g / k)
+
+
 def damped_gauss_newton(q0: np.ndarray, start, evaluate: Callable, operators: Callable,
                         solve: Callable, chi_square: Callable, tol: float, max_iter: int,
                         max_damping: int, residual_rtol: float | None = None,
-                        on_step: Callable | None = None, name: str = "GN"
-                        ) -> GaussNewtonOutcome:
+                        on_step: Callable | None = None, name: str = "GN",
+                        stretch: bool = False) -> GaussNewtonOutcome:
     """Minimise from ``q0`` (its residual ``start``); ``on_step(it, std_before, res, step,
     mu)`` after each accepted step (logs). See the module docstring."""
     q, res = np.asarray(q0, float).copy(), start
@@ -125,7 +150,18 @@ def damped_gauss_newton(q0: np.ndarray, start, evaluate: Callable, operators: Ca
             break
         d, trial = accepted
         c0, n = cost
-        change = (c0 - chi_square(trial)[0]) * n / c0 if c0 > 0.0 and n else float("inf")
+        c1 = chi_square(trial)[0]
+        if stretch and mu == 0.0 and c0 > 0.0 and n and \
+                (c0 - c1) * n / c0 > STRETCH_RATIO * predicted_change(H, b, d, cost) > 0.0:
+            f = stretch_factor(c0, c1, float(d @ b))
+            if f > STRETCH_RATIO:
+                longer = evaluate(q + f * d)
+                c_f = chi_square(longer)[0]
+                if c_f < c1:
+                    logger.debug("%s it %d: step stretched %.3g times (residual %.4f%% -> "
+                                 "%.4f%%)", name, it, f, trial.std_percent, longer.std_percent)
+                    d, trial, c1 = f * d, longer, c_f
+        change = (c0 - c1) * n / c0 if c0 > 0.0 and n else float("inf")
         q, res = q + d, trial
         step = float(np.max(np.abs(d))) if d.size else 0.0
         if on_step is not None:
