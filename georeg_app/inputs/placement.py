@@ -9,10 +9,7 @@ squares over the mesh's two principal axes). The real surface departs from the n
 shape being measured) and the points scatter: only an offset or a tilt beyond
 :data:`SIGMAS` times the robust scatter of the distances, and beyond :data:`MIN_MM`, is
 reported, as a loud warning with the numbers. Few matches (an untextured or synthetic
-image): no verdict, one debug line. :data:`MAX_FEATURES` SIFT features per image (the
-strongest) suffice for a check of tens of micrometres, and cost half the time of the
-5,000 that a region of interest's surface is fitted to (0.58 against 1.34 s on a
-1200 x 1000 pair, the matching included).
+image): no verdict, one debug line.
 """
 from __future__ import annotations
 
@@ -31,12 +28,11 @@ from fesdic_core.imaging.image import Image
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Placement", "placement_check", "SIGMAS", "MIN_MM", "MIN_POINTS", "MAX_FEATURES"]
+__all__ = ["Placement", "placement_check", "SIGMAS", "MIN_MM", "MIN_POINTS"]
 
 SIGMAS = 5.0          # an offset or tilt beyond this many robust std of the distances ...
 MIN_MM = 0.05         # ... and beyond this (mm, at the mesh's edge for a tilt) is reported
 MIN_POINTS = 30       # fewer triangulated points: no verdict
-MAX_FEATURES = 1500   # SIFT features per image
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,8 +83,7 @@ def placement_check(mesh: SurfaceMesh, cameras: Sequence[Camera], images: Sequen
     mask = _mesh_mask(mesh, cameras[0], images[0].shape)
     if not mask.any():
         return None
-    points = stereo_points(cameras[0], cameras[1], images[0].values, images[1].values, mask,
-                           max_features=MAX_FEATURES)
+    points = stereo_points(cameras[0], cameras[1], images[0].values, images[1].values, mask)
     if points.n_points < MIN_POINTS:
         logger.debug("placement check: %d triangulated points on the mesh, no verdict",
                      points.n_points)
