@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # typing only: the shape package imports this one
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["surface_gradient_operator", "tikhonov_weight", "WEAKER_FACTOR", "TikhonovSolver"]
+__all__ = ["surface_gradient_operator", "surface_gradient_integral", "tikhonov_weight", "WEAKER_FACTOR", "TikhonovSolver"]
 
 #: a cosine probe whose ``v^T A v`` is below this fraction of ``|v|^T |A| |v|`` has no
 #: gradient (round-off)
@@ -59,7 +59,14 @@ def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
     The surface gradient of a shape function is ``J (J^T J)^-1 dN/dxi`` with
     ``J = [dX/dxi, dX/deta]`` (3 x 2); then ``A_IJ = sum_g w_g grad_s N_I . grad_s N_J``.
     """
-    element_matrices = []
+    element_matrices = [np.einsum("em,emid,emjd->eij", dA, grad, grad)   # (ne, nn, nn)
+                        for dA, grad in _surface_gradients(mesh)]
+    return assemble([b.connectivity for b in mesh.blocks], element_matrices, mesh.nodes.shape[0])
+
+
+def _surface_gradients(mesh: SurfaceMesh):
+    """Per block: the area weights ``dA`` (ne, m) of its Gauss points and the surface
+    gradients ``grad_s N`` (ne, m, nn, 3) of its shape functions there."""
     for block in mesh.blocks:
         xi, w = gauss_rule(block.family, 3)
         dN = block.family.shape_derivatives(xi)                    # (m, nn, 2)
@@ -69,10 +76,22 @@ def surface_gradient_operator(mesh: SurfaceMesh) -> sps.csr_matrix:
         detG = G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] ** 2
         Ginv = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1),
                          np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / detG[..., None, None]
-        grad = np.einsum("emda,emab,mib->emid", J, Ginv, dN)         # (ne, m, nn, 3)
-        dA = np.sqrt(detG) * w                                        # area weights
-        element_matrices.append(np.einsum("em,emid,emjd->eij", dA, grad, grad))  # (ne, nn, nn)
-    return assemble([b.connectivity for b in mesh.blocks], element_matrices, mesh.nodes.shape[0])
+        yield np.sqrt(detG) * w, np.einsum("emda,emab,mib->emid", J, Ginv, dN)
+
+
+def surface_gradient_integral(mesh: SurfaceMesh) -> tuple[np.ndarray, float]:
+    """``G`` (3, n) with ``G q = int grad_s (L^T q) dX``, and the area ``|Omega|`` (mm^2).
+
+    Then ``q^T (A - G^T G / |Omega|) q = int |grad_s S - <grad_s S>|^2 dX``: the gradient's
+    departure from its mean, zero for every field whose gradient is uniform.
+    """
+    n = mesh.nodes.shape[0]
+    G, area = np.zeros((3, n)), 0.0
+    for block, (dA, grad) in zip(mesh.blocks, _surface_gradients(mesh)):
+        contribution = np.einsum("em,emid->eid", dA, grad)            # (ne, nn, 3)
+        np.add.at(G.T, block.connectivity.ravel(), contribution.reshape(-1, 3))
+        area += float(dA.sum())
+    return G, area
 
 
 def tikhonov_weight(H: sps.spmatrix, A: sps.spmatrix, nodes: np.ndarray, length_mm: float) -> float:
