@@ -10,10 +10,19 @@ Green-Lagrange strains, and the time per frame; and, for frames 1-5, DICe's regr
 (``reference_dice/DICe_solution.e``: the median ``MODEL_DISPLACEMENT_Z`` over its subsets, in
 its best-fit-plane frame) beside our median out-of-plane displacement.
 
-Not yet here: pyvale and al-dic-3d on the same frames (optional benchmark peers).
+``--peers`` (pyvale in the benchmark environment, never a dependency): pyvale's
+``calculate_3d`` (subset 27, step 4, its defaults otherwise, one seed at the ROI's most
+interior pixel, no initial guess) and ``georeg track`` with each method, both with the DICe
+calibration ``cal_dice_pyaldic.xml`` and the ROI of ``examples/gt4_roi/specimen.toml`` (its
+polygon, the cut-out excluded), on the ``--frames`` from frame 0000. Ours is interpolated
+(linearly, on the specimen's plane) at pyvale's subset centres in the reference state,
+pyvale's points where our valid nodes are; printed per frame and method: the RMS of the
+displacement difference in % of the RMS of pyvale's displacement, the median difference per
+component, and the points compared. (pyvale's coordinates are the deformed positions: the
+reference ones are ``X - U``.) al-dic-3d: not yet.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_real_series.py [--data ../shared/data]
-[--methods fe tikhonov georeg] [--frames 0001 0005 0129 large_motion]``
+[--methods fe tikhonov georeg] [--frames 0001 0005 0129 large_motion] [--peers]``
 """
 from __future__ import annotations
 
@@ -30,7 +39,7 @@ import meshio
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path[:0] = [str(REPO), str(REPO / "benchmarks")]
 from georeg_app import cli  # noqa: E402
 
 FRAMES = ("0001", "0002", "0003", "0004", "0005", "0110", "0129", "large_motion")
@@ -59,9 +68,21 @@ def principal(vtu) -> tuple[float, float]:
     return float(np.median((mean + radius)[valid])), float(np.median((mean - radius)[valid]))
 
 
-def track(data: Path, frames, method: str, folder: Path) -> dict:
+def specimen_config(data: Path, calibration: str = "vic3d") -> str:
+    """The example's configuration, reading ``data``, with the VIC-3D or DICe calibration."""
     spec = (REPO / "examples" / "gt4_roi" / "specimen.toml").read_text()
     spec = spec.replace('"../../../shared/data', f'"{data.as_posix()}')
+    if calibration == "dice":                        # the example's commented alternative
+        spec = spec.replace("\nvic3d = ", "\n# vic3d = ").replace("\n# dice = ", "\ndice = ")
+    return spec
+
+
+def track(data: Path, frames, method: str, folder: Path, calibration: str = "vic3d",
+          reference: Path | None = None) -> dict:
+    spec = specimen_config(data, calibration)
+    if reference is not None:      # a `georeg measure` folder: its cameras, surface, method
+        images = spec[spec.index("[images]"):spec.index("[cameras]")]
+        spec = images + f'\n[reference]\ndir = "{reference.as_posix()}"\n'
     cam0 = ", ".join(f'"{_image(data, f, 0).as_posix()}"' for f in frames)
     cam1 = ", ".join(f'"{_image(data, f, 1).as_posix()}"' for f in frames)
     config = folder / f"track_{method}.toml"
@@ -74,17 +95,124 @@ def track(data: Path, frames, method: str, folder: Path) -> dict:
     return dict(code=code, time_s=time.perf_counter() - t0, summary=summary, out=out)
 
 
+def roi_mask(shape: tuple[int, int]) -> np.ndarray:
+    """Camera 0's pixels (h, w) inside the example's ROI polygon and outside its cut-out."""
+    import tomllib
+    import cv2
+    geometry = tomllib.loads((REPO / "examples" / "gt4_roi" / "specimen.toml").read_text())["geometry"]
+    mask = np.zeros(shape, np.uint8)
+    cv2.fillPoly(mask, [np.round(geometry["polygon_px"]).astype(np.int32)], 1)
+    for hole in geometry.get("exclude_px", []):
+        cv2.fillPoly(mask, [np.round(hole).astype(np.int32)], 0)
+    return mask > 0
+
+
+def pyvale_frames(data: Path, frames, folder: Path) -> dict:
+    """pyvale's calculate_3d of ``frames`` from frame 0000 with the DICe calibration:
+    {frame: (reference points (p, 3), U (p, 3))} in our cameras' world frame; and seconds."""
+    import cv2
+    from bench_vs_pyvale import SUBSET_PX, pyvale_calib
+    from fesdic_core.cameras.io.vic3d_dice import read_dice
+    from pyvale import dic
+    cams = read_dice(data / "stereo_dic_sample3" / "cal_dice_pyaldic.xml")
+    read = lambda f, k: cv2.imread(str(_image(data, f, k)), cv2.IMREAD_GRAYSCALE)
+    reference = [read("0000", k) for k in (0, 1)]
+    mask = roi_mask(reference[0].shape)
+    depth = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    seed_y, seed_x = np.unravel_index(int(np.argmax(depth)), depth.shape)
+    folder.mkdir(parents=True, exist_ok=True)
+    t = time.perf_counter()
+    dic.calculate_3d(reference=reference,
+                     deformed=[np.stack([read(f, k) for f in frames]) for k in (0, 1)],
+                     calibration=pyvale_calib(cams), roi_mask=mask, seed=[int(seed_x), int(seed_y)],
+                     subset_size=SUBSET_PX, subset_step=4, num_threads=2,
+                     output_basepath=folder, output_binary=True, print_level=0)
+    seconds = time.perf_counter() - t
+    s = dic.import_3d(data=str(folder / "dic_results_*"), delimiter=",", binary=True,
+                      layout="column", print_level=0).stereo
+    R0 = cv2.Rodrigues(np.asarray(cams[0].rvec, float).reshape(3, 1))[0]
+    t0 = np.asarray(cams[0].tvec, float).ravel()
+    out = {}
+    for i, f in enumerate(frames):
+        X = np.column_stack([np.ravel(a[i]) for a in (s.x_mm, s.y_mm, s.z_mm)])
+        U = np.column_stack([np.ravel(a[i]) for a in (s.u_mm, s.v_mm, s.w_mm)])
+        ok = np.all(np.isfinite(X), axis=1) & np.all(np.isfinite(U), axis=1)
+        out[f] = ((X[ok] - U[ok] - t0) @ R0, U[ok] @ R0)
+    return out, seconds
+
+
+def against_pyvale(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, int]:
+    """Our valid nodes' displacement interpolated at pyvale's reference points (on the
+    specimen's best plane): (RMS difference in % of pyvale's RMS, median difference (3,) um,
+    points compared)."""
+    from scipy.interpolate import LinearNDInterpolator
+    valid = np.asarray(vtu.point_data.get("valid", np.ones(len(vtu.points))), bool)
+    nodes, ours = np.asarray(vtu.points, float)[valid], np.asarray(vtu.point_data["displacement_mm"])[valid]
+    centre = nodes.mean(axis=0)
+    axes = np.linalg.svd(nodes - centre, full_matrices=False)[2][:2]
+    at = LinearNDInterpolator((nodes - centre) @ axes.T, ours)((X - centre) @ axes.T)
+    common = np.all(np.isfinite(at), axis=1)
+    diff = at[common] - U[common]
+    rms = float(np.sqrt(np.mean(np.sum(diff ** 2, axis=1))) /
+                np.sqrt(np.mean(np.sum(U[common] ** 2, axis=1))))
+    return 100.0 * rms, 1e3 * np.median(diff, axis=0), int(common.sum())
+
+
+def peers(args) -> None:
+    """``--peers``: pyvale and ours on the same frames with the DICe calibration."""
+    try:
+        import pyvale  # noqa: F401
+    except ImportError:
+        print("peers: skipped: pyvale is not importable by this python (a benchmark peer: "
+              "python -m venv --system-site-packages VENV && VENV/bin/pip install pyvale)")
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        theirs, seconds = pyvale_frames(args.data, args.frames, Path(tmp) / "pyvale")
+        print(f"\n## pyvale calculate_3d (subset 27, step 4): {seconds:.0f} s for "
+              f"{len(args.frames)} frames ({seconds / len(args.frames):.1f} s per frame)")
+        shape = Path(tmp) / "shape"
+        config = Path(tmp) / "shape.toml"
+        config.write_text(specimen_config(args.data, "dice"))
+        code = cli.main(["-q", "measure", str(config), "--out", str(shape)])
+        frame = json.loads((shape / "summary.json").read_text())["specimen"]
+        origin, axes = np.asarray(frame["frame_origin_mm"]), np.asarray(frame["frame_axes"])
+        print(f"\n## the reference shape (DICe calibration): exit {code}")
+        for method in args.methods:
+            run = track(args.data, args.frames, method, Path(tmp), calibration="dice",
+                        reference=shape)
+            print(f"\n## {method} (DICe calibration) against pyvale: exit {run['code']}, "
+                  f"{run['time_s']:.0f} s in all (reference shape included)")
+            print(f"{'frame':13s} {'status':7s} {'RMS diff (% of RMS U)':>22s} "
+                  f"{'median diff x, y, z (um)':>26s} {'points':>7s} {'pyvale RMS U (mm)':>18s}")
+            for name, f in zip(args.frames, run["summary"].get("frames", [])):
+                if not f.get("mesh_file"):
+                    print(f"{name:13s} {f['status']:7s} no output: {f.get('failure', '')[:80]}")
+                    continue
+                X, U = theirs[name]                   # to the specimen frame of our outputs
+                X, U = (X - origin) @ axes.T, U @ axes.T
+                rms, med, n = against_pyvale(meshio.read(run["out"] / f["mesh_file"]), X, U)
+                print(f"{name:13s} {f['status']:7s} {rms:22.3f} {med[0]:8.2f}{med[1]:9.2f}"
+                      f"{med[2]:9.2f} {n:7d} {np.sqrt(np.mean(np.sum(U ** 2, axis=1))):18.4f}")
+                if f["status"] != "ok":
+                    print(f"{'':13s} {f.get('failure', '')[:120]}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     parser.add_argument("--methods", nargs="+", default=["fe", "tikhonov", "georeg"])
     parser.add_argument("--frames", nargs="+", default=list(FRAMES))
+    parser.add_argument("--peers", action="store_true",
+                        help="pyvale and ours with the DICe calibration, instead of the table")
     args = parser.parse_args(argv)
     if not (args.data / "stereo_dic_sample3" / "images").is_dir():
         raise SystemExit(f"{args.data}: no stereo_dic_sample3/images (the data are not part of "
                          "the project)")
     print(f"# bench_real_series: {platform.node()}, {os.cpu_count()} cores, load "
           f"{os.getloadavg()[0]:.2f}", flush=True)
+    if args.peers:
+        peers(args)
+        return 0
     dice = dice_medians(args.data)
     with tempfile.TemporaryDirectory() as tmp:
         for method in args.methods:
