@@ -19,7 +19,8 @@ polygon, the cut-out excluded), on the ``--frames`` from frame 0000. Ours is int
 pyvale's points where our valid nodes are; printed per frame and method: the RMS of the
 displacement difference in % of the RMS of pyvale's displacement, the median difference per
 component, and the points compared. (pyvale's coordinates are the deformed positions: the
-reference ones are ``X - U``.) al-dic-3d: not yet.
+reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run`` with its defaults, the ROI as a
+mask, when installed in the same environment) likewise, and against pyvale.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_real_series.py [--data ../shared/data]
 [--methods fe tikhonov georeg] [--frames 0001 0005 0129 large_motion] [--peers]``
@@ -141,6 +142,46 @@ def pyvale_frames(data: Path, frames, folder: Path) -> dict:
     return out, seconds
 
 
+def aldic_frames(data: Path, frames, folder: Path) -> tuple[dict, float]:
+    """al-dic-3d's headless run (``al-dic-3d run``, its defaults, the ROI as a mask on the
+    left reference image, the DICe calibration) of ``frames`` from frame 0000, as
+    :func:`pyvale_frames`; frames it leaves without a point are absent."""
+    import subprocess
+    import cv2
+    from fesdic_core.cameras.io.vic3d_dice import read_dice
+    calibration = data / "stereo_dic_sample3" / "cal_dice_pyaldic.xml"
+    cams = read_dice(calibration)
+    (folder / "img").mkdir(parents=True, exist_ok=True)
+    names = ["0000", *frames]
+    for i, f in enumerate(names):           # its pairing check wants one frame index per name
+        for k, side in enumerate("LR"):
+            link = folder / "img" / f"{side}_{i:04d}.png"
+            link.unlink(missing_ok=True)
+            link.symlink_to(_image(data, f, k))
+    shape = cv2.imread(str(_image(data, "0000", 0)), cv2.IMREAD_GRAYSCALE).shape
+    cv2.imwrite(str(folder / "roi.png"), roi_mask(shape).astype(np.uint8) * 255)
+    side = lambda s: ", ".join(f'"img/{s}_{i:04d}.png"' for i in range(len(names)))
+    (folder / "config.toml").write_text(
+        f'[calibration]\nfile = "{calibration.as_posix()}"\nformat = "dice"\n\n'
+        f'[sequence]\nleft = [{side("L")}]\nright = [{side("R")}]\n\n'
+        '[roi]\nmask = "roi.png"\n\n[output]\ndir = "out"\n')
+    t = time.perf_counter()
+    subprocess.run([str(Path(sys.executable).parent / "al-dic-3d"), "run", "-q",
+                    str(folder / "config.toml"), "--formats", "npz"], check=True)
+    seconds = time.perf_counter() - t
+    result = np.load(folder / "out" / "run.npz")
+    R0 = cv2.Rodrigues(np.asarray(cams[0].rvec, float).reshape(3, 1))[0]
+    t0 = np.asarray(cams[0].tvec, float).ravel()
+    X0 = result["points3D"][0]
+    out = {}
+    for i, f in enumerate(frames, start=1):
+        U = result["displacement3D"][i]
+        ok = np.all(np.isfinite(X0), axis=1) & np.all(np.isfinite(U), axis=1)
+        if ok.any():
+            out[f] = ((X0[ok] - t0) @ R0, U[ok] @ R0)
+    return out, seconds
+
+
 def against_pyvale(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, int]:
     """Our valid nodes' displacement interpolated at pyvale's reference points (on the
     specimen's best plane): (RMS difference in % of pyvale's RMS, median difference (3,) um,
@@ -158,6 +199,17 @@ def against_pyvale(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray
     return 100.0 * rms, 1e3 * np.median(diff, axis=0), int(common.sum())
 
 
+def peer_difference(a: tuple, b: tuple, within_mm: float = 2.0) -> float:
+    """RMS of ``a``'s displacement at ``b``'s nearest points (within ``within_mm``) minus
+    ``b``'s, in % of ``b``'s RMS displacement there."""
+    from scipy.spatial import cKDTree
+    gap, nearest = cKDTree(a[0]).query(b[0])
+    near = gap <= within_mm
+    diff = a[1][nearest[near]] - b[1][near]
+    return 100.0 * float(np.sqrt(np.mean(np.sum(diff ** 2, axis=1)) /
+                                 np.mean(np.sum(b[1][near] ** 2, axis=1))))
+
+
 def peers(args) -> None:
     """``--peers``: pyvale and ours on the same frames with the DICe calibration."""
     try:
@@ -167,9 +219,25 @@ def peers(args) -> None:
               "python -m venv --system-site-packages VENV && VENV/bin/pip install pyvale)")
         return
     with tempfile.TemporaryDirectory() as tmp:
+        codes = {}
         theirs, seconds = pyvale_frames(args.data, args.frames, Path(tmp) / "pyvale")
+        codes["pyvale"] = theirs
         print(f"\n## pyvale calculate_3d (subset 27, step 4): {seconds:.0f} s for "
               f"{len(args.frames)} frames ({seconds / len(args.frames):.1f} s per frame)")
+        if (Path(sys.executable).parent / "al-dic-3d").is_file():
+            aldic, seconds = aldic_frames(args.data, args.frames, Path(tmp) / "aldic")
+            codes["al-dic-3d"] = aldic
+            counts = ", ".join(f"{f}: {len(aldic[f][0])}" if f in aldic else f"{f}: none"
+                               for f in args.frames)
+            print(f"## al-dic-3d run (its defaults): {seconds:.0f} s for {len(args.frames)} "
+                  f"frames; points {counts}")
+        else:
+            print("## al-dic-3d: not installed in this environment (pip install al-dic-3d)")
+        for f in args.frames:
+            if f in theirs and f in codes.get("al-dic-3d", {}):
+                print(f"{f}: al-dic-3d against pyvale (al-dic-3d at pyvale's points, nearest "
+                      f"within 2 mm): {peer_difference(codes['al-dic-3d'][f], theirs[f]):.3f} % "
+                      "of pyvale's RMS displacement")
         shape = Path(tmp) / "shape"
         config = Path(tmp) / "shape.toml"
         config.write_text(specimen_config(args.data, "dice"))
@@ -182,17 +250,24 @@ def peers(args) -> None:
                         reference=shape)
             print(f"\n## {method} (DICe calibration) against pyvale: exit {run['code']}, "
                   f"{run['time_s']:.0f} s in all (reference shape included)")
-            print(f"{'frame':13s} {'status':7s} {'RMS diff (% of RMS U)':>22s} "
-                  f"{'median diff x, y, z (um)':>26s} {'points':>7s} {'pyvale RMS U (mm)':>18s}")
+            print(f"{'frame':13s} {'peer':10s} {'status':7s} {'RMS diff (% of RMS U)':>22s} "
+                  f"{'median diff x, y, z (um)':>26s} {'points':>7s} {'peer RMS U (mm)':>16s}")
             for name, f in zip(args.frames, run["summary"].get("frames", [])):
                 if not f.get("mesh_file"):
-                    print(f"{name:13s} {f['status']:7s} no output: {f.get('failure', '')[:80]}")
+                    print(f"{name:13s} {'':10s} {f['status']:7s} no output: "
+                          f"{f.get('failure', '')[:80]}")
                     continue
-                X, U = theirs[name]                   # to the specimen frame of our outputs
-                X, U = (X - origin) @ axes.T, U @ axes.T
-                rms, med, n = against_pyvale(meshio.read(run["out"] / f["mesh_file"]), X, U)
-                print(f"{name:13s} {f['status']:7s} {rms:22.3f} {med[0]:8.2f}{med[1]:9.2f}"
-                      f"{med[2]:9.2f} {n:7d} {np.sqrt(np.mean(np.sum(U ** 2, axis=1))):18.4f}")
+                vtu = meshio.read(run["out"] / f["mesh_file"])
+                for code, points in codes.items():
+                    if name not in points:
+                        print(f"{name:13s} {code:10s} (no point)")
+                        continue
+                    X, U = points[name]               # to the specimen frame of our outputs
+                    X, U = (X - origin) @ axes.T, U @ axes.T
+                    rms, med, n = against_pyvale(vtu, X, U)
+                    print(f"{name:13s} {code:10s} {f['status']:7s} {rms:22.3f} {med[0]:8.2f}"
+                          f"{med[1]:9.2f}{med[2]:9.2f} {n:7d} "
+                          f"{np.sqrt(np.mean(np.sum(U ** 2, axis=1))):16.4f}")
                 if f["status"] != "ok":
                     print(f"{'':13s} {f.get('failure', '')[:120]}")
 
