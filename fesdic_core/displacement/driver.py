@@ -75,8 +75,8 @@ MIN_POINTS_PER_ELEMENT = 16
 
 __all__ = ["JACOBIANS", "DISPLACEMENT_PREFILTER_PX", "DISPLACEMENT_MAX_INVALID_SHARE",
            "MIN_POINTS_PER_ELEMENT", "DisplacementSettings", "DisplacementReference",
-           "DisplacementMeasurement", "DisplacementGNResult", "displacement_reference", "displacement_gauss_newton",
-           "measure_displacement", "displacement_verdict"]
+           "DisplacementMeasurement", "DisplacementGNResult", "displacement_reference",
+           "displacement_gauss_newton", "measure_displacement", "displacement_verdict"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -383,8 +383,8 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                 full = dataclasses.replace(settings, jacobian="current")
                 again = measure_displacement(dataclasses.replace(reference, settings=full),
                                              images, given, U0, progress)
-                return dataclasses.replace(again, time_s=time.perf_counter() - t0,
-                                           iterations=total_iterations + again.iterations)
+                return dataclasses.replace(again, time_s=time.perf_counter() - t0, iterations=(
+                    total_iterations + gn.iterations + again.iterations))
         U, total_iterations = gn.U, total_iterations + gn.iterations
         noise_percent, ratios, contrast = _noise_floor(view, gn.residual, imgs)
         report = ScaleReport(scale=scale, residual_percent=gn.residual.std_percent,

@@ -46,7 +46,8 @@ if TYPE_CHECKING:  # typing only: the shape package imports this one
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["surface_gradient_operator", "surface_gradient_integral", "tikhonov_weight", "WEAKER_FACTOR", "TikhonovSolver"]
+__all__ = ["surface_gradient_operator", "surface_gradient_integral", "tikhonov_weight",
+           "WEAKER_FACTOR", "TikhonovSolver"]
 
 #: a cosine probe whose ``v^T A v`` is below this fraction of ``|v|^T |A| |v|`` has no
 #: gradient (round-off)
