@@ -100,7 +100,8 @@ def roi_mask(shape: tuple[int, int]) -> np.ndarray:
     """Camera 0's pixels (h, w) inside the example's ROI polygon and outside its cut-out."""
     import tomllib
     import cv2
-    geometry = tomllib.loads((REPO / "examples" / "gt4_roi" / "specimen.toml").read_text())["geometry"]
+    example = REPO / "examples" / "gt4_roi" / "specimen.toml"
+    geometry = tomllib.loads(example.read_text())["geometry"]
     mask = np.zeros(shape, np.uint8)
     cv2.fillPoly(mask, [np.round(geometry["polygon_px"]).astype(np.int32)], 1)
     for hole in geometry.get("exclude_px", []):
@@ -182,13 +183,14 @@ def aldic_frames(data: Path, frames, folder: Path) -> tuple[dict, float]:
     return out, seconds
 
 
-def against_pyvale(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, int]:
-    """Our valid nodes' displacement interpolated at pyvale's reference points (on the
-    specimen's best plane): (RMS difference in % of pyvale's RMS, median difference (3,) um,
-    points compared)."""
+def against_peer(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, int]:
+    """Our valid nodes' displacement interpolated at a peer's reference points (on the
+    specimen's best plane): (RMS difference in % of the peer's RMS, median difference (3,)
+    um, points compared)."""
     from scipy.interpolate import LinearNDInterpolator
     valid = np.asarray(vtu.point_data.get("valid", np.ones(len(vtu.points))), bool)
-    nodes, ours = np.asarray(vtu.points, float)[valid], np.asarray(vtu.point_data["displacement_mm"])[valid]
+    nodes = np.asarray(vtu.points, float)[valid]
+    ours = np.asarray(vtu.point_data["displacement_mm"])[valid]
     centre = nodes.mean(axis=0)
     axes = np.linalg.svd(nodes - centre, full_matrices=False)[2][:2]
     at = LinearNDInterpolator((nodes - centre) @ axes.T, ours)((X - centre) @ axes.T)
@@ -264,7 +266,7 @@ def peers(args) -> None:
                         continue
                     X, U = points[name]               # to the specimen frame of our outputs
                     X, U = (X - origin) @ axes.T, U @ axes.T
-                    rms, med, n = against_pyvale(vtu, X, U)
+                    rms, med, n = against_peer(vtu, X, U)
                     print(f"{name:13s} {code:10s} {f['status']:7s} {rms:22.3f} {med[0]:8.2f}"
                           f"{med[1]:9.2f}{med[2]:9.2f} {n:7d} "
                           f"{np.sqrt(np.mean(np.sum(U ** 2, axis=1))):16.4f}")

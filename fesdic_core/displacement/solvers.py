@@ -42,8 +42,8 @@ class ComponentTikhonovSolver:
     integral of the gradient (:func:`~fesdic_core.solve.tikhonov.surface_gradient_integral`),
     so ``u^T A3 u`` penalises ``int |grad_s u - <grad_s u>|^2``: a homogeneous deformation (a
     uniform strain, a small rotation) costs nothing. With ``A`` alone it did: at 10 mm a 3 %
-    stretch was read 9.5 % low (``benchmarks/bench_subpixel.py``). ``A3`` is sparse minus rank 9 (``kron(A, Lam) - W W^T``,
-    ``W = kron(G^T, Lam^1/2) / |Omega|^1/2``); the step is solved by the Woodbury identity
+    stretch was read 9.5 % low (``benchmarks/bench_subpixel.py``). ``A3`` is sparse minus
+    rank 9 (``kron(A, Lam) - W W^T``, ``W = kron(G^T, Lam^1/2) / |Omega|^1/2``); the step is solved by the Woodbury identity
     on the factorized sparse part.
 
     Each component gets its own weight ``lam_k`` from its own block of ``H`` (dofs

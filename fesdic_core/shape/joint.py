@@ -381,7 +381,8 @@ def _stretched(system: JointSystem, step: tuple, moved: list, X: np.ndarray,
     the Stereo DIC Challenge part and on a plate with both cameras free). Along the step ``f d``
     the cost is a parabola with the exact slope ``g = d . [b, b_p]`` and the fall measured at
     ``f = 1`` (:func:`~fesdic_core.solve.gauss_newton.stretch_factor`); its minimum is
-    evaluated once and kept if the cost is lower there. ``at(f)``: the cameras, points and residual at ``f`` times the step.
+    evaluated once and kept if the cost is lower there. ``at(f)``: the cameras, points and
+    residual at ``f`` times the step.
     """
     c0, c1 = system.cost[0], chi_square(res, quad)[0]
     if not _fall(system.cost, (c1, 0)) > STRETCH_RATIO * system.predicted_fall(*step) > 0.0:
