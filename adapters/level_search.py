@@ -3,18 +3,24 @@
 1. The paper's coarse-to-fine run (section 3.3): image scale ``s`` on spline level
    ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
-2. At the finest image scale, the level moves while the Bayesian information criterion
-   falls (:mod:`georeg_plugin.levels.selection`): the gray-level cost at every other level, finer
-   or coarser, is predicted from the converged Gauss-Newton system (the search looks
-   ahead: it does not stop on a level that adds too little when a finer one holds a
-   feature, and it leaves the start for a coarser level when the start's extra dofs only
-   fit noise, as on a flat plate); the level of lowest predicted criterion is iterated
-   from its predicted optimum (the levels are nested, Eq. 13: no restart from scratch),
-   its measured criterion decides, and the prediction is renewed from there. A level is
-   iterated at most once. Below the nominal spline, the search also looks at the bilinear
-   level of its parameter domain (:func:`~georeg_plugin.spline.refine.linear_patch`: nested
-   in every level, 4 dofs of which 3 are the rigid normal motions of a plane), so that a
-   flat specimen is not left with the biquadratic nominal's 6 other dofs of noise.
+2. At the finest image scale, the level moves while the estimated shape error falls
+   (:mod:`georeg_plugin.levels.risk`): from the converged Gauss-Newton system, the optimum
+   of every other level, finer or coarser, is predicted (Eq. 21 at the level: the levels are
+   nested, Eq. 13, no restart from scratch), and with it each level's expected RMS error at
+   the nodes, bias plus noise, modulo the rigid normal motions: the change to the finest
+   level of the ladder, de-biased by that change's known noise, plus the level's own noise
+   (Stein's unbiased risk estimate in the metric of the node values). The level of least
+   estimated error is iterated from its predicted optimum; both levels' errors estimated
+   again from its converged system decide, and the prediction is renewed from there. A level
+   is iterated at most once. The search looks ahead (it does not stop on a level that adds
+   too little when a finer one holds a feature) and moves both ways (it leaves the start for
+   a coarser level when the start's extra dofs only fit noise, as on a flat plate). Below
+   the nominal spline, the search also looks at the bilinear level of its parameter domain
+   (:func:`~georeg_plugin.spline.refine.linear_patch`: nested in every level, 4 dofs of
+   which 3 are the rigid normal motions of a plane), so that a flat specimen is not left
+   with the biquadratic nominal's 6 other dofs of noise. The Hannan-Quinn criterion of
+   :mod:`georeg_plugin.levels.selection` is still recorded per level (``criterion``,
+   ``gain``): it answers which level is true, not which estimate is closest.
 3. If another level was chosen: the search's last Gauss-Newton is the measurement, and the
    core's :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty. With
    calibration by the joint Gauss-Newton (``coupling = "joint"``), each level is iterated on
@@ -23,7 +29,7 @@
    point of calibration and shape at that level (the core's
    :func:`~fesdic_core.shape.driver.measure`).
 
-The noise variance of the criterion is the core's noise model ``kappa`` (:mod:`fesdic_core.shape.uncertainty`:
+The noise variance of the estimate is the core's noise model ``kappa`` (:mod:`fesdic_core.shape.uncertainty`:
 image noise through the image model, scaled to the residual the FE model leaves), or the
 larger share per dof of the image model's misfit, measured on the dofs that the FE mesh
 adds beyond the finest spline level (:func:`effective_variance`).
@@ -43,14 +49,16 @@ from fesdic_core.cameras.rig import stereo_transform
 from fesdic_core.fe.mesh import nodal_areas, node_normals
 from fesdic_core.imaging.image import pyramid
 from fesdic_core.shape.driver import Measurement, MeasurementSettings, conclude, measure
+from fesdic_core.shape.gauge import rigid_normal_modes
 from fesdic_core.shape.joint import joint_gauss_newton
 from fesdic_core.shape.operators import shape_gauss_newton
 from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.multipatch import part_space
 from georeg_plugin.levels.operators import MultilevelSpace, gluing_matrix, nested_space
+from georeg_plugin.levels.risk import estimated_risk, node_metric
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
-                                            penalty_per_dof, predicted_fit)
+                                            predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
 from georeg_plugin.levels.support import ZERO_PIVOT, mesh_seen
 from georeg_plugin.spline.refine import insert_knots, linear_patch, refine_uniform
@@ -296,33 +304,53 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     def residual_of(chi: float, state) -> float:                 # std scales like sqrt(c)
         return state.residual.std_percent * np.sqrt(max(chi, 0.0) / state.chi_square)
 
-    level, q, state = start, first.q, first.state
-    trials, iterations, current, visited, kept = [], 0, None, {start}, None
-    while True:
-        # the optimum of every level (Eq. 21 at the level), predicted from the current system
+    metric = node_metric(nodal_areas(model.mesh), rigid_normal_modes(model.mesh.nodes, normals)[0])
+
+    traces: dict = {}        # tr(M G_s) per unit noise: from the start's H (a variance: the few
+    #                          per cent by which H changes between the levels do not matter)
+
+    def assess(state, q) -> tuple[dict, float, dict]:
+        """Every level's predicted optimum (Eq. 21 at the level, from the current system), the
+        noise variance, and every level's estimated shape error (:mod:`~georeg_plugin.levels.risk`,
+        against the finest level of the ladder)."""
         moves = {other: _move_to(space, other, state.H, state.b, q, finest)
                  for other in range(n_levels)}
-        variance = effective_variance(state, kappa, moves[0],
-                                      seen_level_dofs(space, 0, state.H))
-        if current is None or current.variance != variance:
-            current = _trial(level, space, state.chi_square, (), variance,
-                             state.residual.std_percent, True, state.n_points, state.H)
-            trials.append(current)
+        variance = effective_variance(state, kappa, moves[0], seen_level_dofs(space, 0, state.H))
+        if not traces:
+            traces.update({other: metric.trace(*GeometricRegularization(space, {finest: other})
+                                               .step_covariance(state.H, finest))
+                           for other in range(n_levels)})
+        risks = {other: estimated_risk(moves[other] - moves[0], traces[other], traces[0],
+                                       variance, metric) for other in range(n_levels)}
+        return moves, variance, risks
+
+    def record(other: int, state, chi: float, reference: tuple, variance: float, risks: dict,
+               measured: bool) -> LevelTrial:
+        trial = _trial(other, space, chi, reference, variance, residual_of(chi, state), measured,
+                       state.n_points, state.H)
+        risk, spread = risks[other]
+        return dataclasses.replace(trial, error_mm=float(np.sqrt(risk)),
+                                   std_mm=float(np.sqrt(spread)))
+
+    level, q, state = start, first.q, first.state
+    moves, variance, risks = assess(state, q)
+    current = record(level, state, state.chi_square, (), variance, risks, True)
+    trials, iterations, visited, kept = [current], 0, {start}, None
+    while True:
         reference = (current.chi_square, current.dofs)
-        predictions = [_trial(other, space, chi, reference, variance, residual_of(chi, state),
-                              False, state.n_points, state.H)
-                       for other, d in moves.items() if other not in visited
-                       for chi in [predicted_fit(state.chi_square, state.b, d, state.H)]]
+        predictions = [record(other, state, predicted_fit(state.chi_square, state.b, d, state.H),
+                              reference, variance, risks, False)
+                       for other, d in moves.items() if other not in visited]
         trials += predictions
-        better = [t for t in predictions if t.criterion < current.criterion]
-        logger.info("level search: level %d (%d dofs) criterion %.6g; predicted gains per dof %s "
-                    "(threshold 2 ln ln N = %.3g; noise variance %.3g = %.3g kappa)", level,
-                    current.dofs, current.criterion,
-                    ", ".join(f"level {t.level}: {t.gain:.3g}" for t in predictions),
-                    penalty_per_dof(state.n_points), variance, variance / kappa)
+        better = [t for t in predictions if t.error_mm < current.error_mm]
+        logger.info("level search: level %d (%d dofs) estimated error %.3g um; predicted %s "
+                    "(noise variance %.3g = %.3g kappa)", level, current.dofs,
+                    1e3 * current.error_mm,
+                    ", ".join(f"level {t.level}: {1e3 * t.error_mm:.3g} um" for t in predictions),
+                    variance, variance / kappa)
         if not better:
             break
-        best = min(better, key=lambda t: t.criterion)              # the best predicted level
+        best = min(better, key=lambda t: t.error_mm)               # the best predicted level
         visited.add(best.level)
         solver = GeometricRegularization(space, {finest: best.level})
         if joint:            # the poses move with the shape: no second measurement at the end
@@ -340,16 +368,19 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         trial_cams = list(shape.cameras) if joint else cams
         trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, trial_cams,
                                        settings.normalisation, mask, residual=shape.residual)
-        measured = _trial(best.level, space, trial_state.chi_square, reference, variance,
-                          trial_state.residual.std_percent, True, trial_state.n_points,
-                          trial_state.H)
+        # both levels' errors estimated again from the measured level's system: one state, so
+        # that the comparison is not one of two states' noise
+        trial_moves, trial_variance, trial_risks = assess(trial_state, shape.q)
+        measured = record(best.level, trial_state, trial_state.chi_square, reference,
+                          trial_variance, trial_risks, True)
         trials.append(measured)
-        logger.info("level search: level %d measured: residual %.4f%%, criterion %.6g, gain %.3g",
-                    best.level, measured.residual_percent, measured.criterion, measured.gain)
-        if measured.criterion >= current.criterion:
+        logger.info("level search: level %d measured: residual %.4f%%, estimated error %.3g um "
+                    "(level %d: %.3g um)", best.level, measured.residual_percent,
+                    1e3 * measured.error_mm, level, 1e3 * np.sqrt(trial_risks[level][0]))
+        if measured.error_mm >= np.sqrt(trial_risks[level][0]):
             break
         level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
-        cams = trial_cams
+        moves, variance, risks, cams = trial_moves, trial_variance, trial_risks, trial_cams
     solver = GeometricRegularization(space, {finest: level})
     if level != start and (joint or not settings.calibrate):
         # the cameras are fixed, or moved by the joint steps: the search's last Gauss-Newton is

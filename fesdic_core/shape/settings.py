@@ -183,6 +183,19 @@ class Measurement:
         return self.residual.std_percent
 
     @property
+    def shape_uncertainty_mm(self) -> np.ndarray | None:
+        """(n,) mm: how far off a node may be, ``sqrt(std^2 + bias^2)`` of ``shape_std_mm`` (the
+        image noise through the step's map) and ``shape_bias_mm`` (the step a richer space
+        would still take: the bias that the regularization leaves), or the std alone when the
+        solver gives no bias indicator; None without the std."""
+        if self.shape_std_mm is None:
+            return None
+        std = np.asarray(self.shape_std_mm, dtype=float)
+        if self.shape_bias_mm is None:
+            return std
+        return np.hypot(std, np.asarray(self.shape_bias_mm, dtype=float))
+
+    @property
     def valid(self) -> np.ndarray:
         """(n,) bool: the node passed its local checks (all True without them)."""
         if self.validity is None:

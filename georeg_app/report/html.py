@@ -227,7 +227,8 @@ def level_search_html(run) -> str:
 def methods_table_html(run) -> str:
     """HTML table of the methods: status (failed: reason), RMS error vs truth (um), RMS
     distance to BFP (mm), residual and noise floor (%; the column only when the run gives
-    ``noise_percent``), iterations, time, convergence. Failed rows have class "failed",
+    ``noise_percent``), iterations, time, convergence, the shape's std, bias indicator and
+    uncertainty (their root sum of squares), the level chosen. Failed rows have class "failed",
     the best method's row class "best"."""
     noise = any(getattr(r.measurement, "noise_percent", None) is not None for r in run.results)
     head = ("<tr><th>method</th><th>name</th><th>param</th><th>status</th>"
@@ -235,7 +236,7 @@ def methods_table_html(run) -> str:
             "<th>residual (% dyn.)</th>" + ("<th>noise floor (% dyn.)</th>" if noise else "")
             + "<th>iterations</th><th>time (s)</th><th>converged</th>"
             "<th>shape std median / max (µm)</th><th>bias indicator median / max (µm)</th>"
-            "<th>chosen</th></tr>")
+            "<th>uncertainty median / max (µm)</th><th>chosen</th></tr>")
     best, _ = best_method(run)
     rows = []
     for r in run.results:
@@ -246,12 +247,13 @@ def methods_table_html(run) -> str:
                  (param if isinstance(param, str) else f"{param:g}"),
                  status, _f(rms_error_um(r)), _f(_rms(r.distance_to_bfp_mm))]
         if m is None:
-            cells += ["n/a"] * (8 if noise else 7)
+            cells += ["n/a"] * (9 if noise else 8)
         else:
             cells += [_f(m.residual_percent), *([_f(getattr(m, "noise_percent", None))] * noise),
                       str(int(m.iterations)), _f(m.time_s, 3), "yes" if m.converged else "no",
                       _median_max_um(getattr(m, "shape_std_mm", None)),
-                      _median_max_um(getattr(m, "shape_bias_mm", None)), _chosen(r)]
+                      _median_max_um(getattr(m, "shape_bias_mm", None)),
+                      _median_max_um(getattr(m, "shape_uncertainty_mm", None)), _chosen(r)]
         css = "failed" if is_failed(r) else ("best" if r is best else "")
         tds = "".join(f'<td class="status">{html.escape(c)}</td>' if k == 3 else
                       f"<td>{html.escape(c)}</td>" for k, c in enumerate(cells))

@@ -198,12 +198,12 @@ def _stat(values, how) -> float | None:
 
 
 def _uncertainty_entry(m) -> dict:
-    """The shape's standard deviation and bias indicator in summary.json (mm)."""
-    std, bias = getattr(m, "shape_std_mm", None), getattr(m, "shape_bias_mm", None)
+    """The shape's standard deviation, bias indicator and uncertainty in summary.json (mm)."""
+    entry = {f"shape_{name}_{how.__name__}_mm": _stat(values, how)
+             for name in ("std", "bias", "uncertainty")
+             for values in [getattr(m, f"shape_{name}_mm", None)] for how in (np.median, np.max)}
     noise = getattr(m, "noise", None)
-    return {"shape_std_median_mm": _stat(std, np.median), "shape_std_max_mm": _stat(std, np.max),
-            "shape_bias_median_mm": _stat(bias, np.median), "shape_bias_max_mm": _stat(bias, np.max),
-            "noise_variance": None if noise is None else _number(noise.variance)}
+    return {**entry, "noise_variance": None if noise is None else _number(noise.variance)}
 
 
 def _levels_chosen(result) -> dict | None:
@@ -226,7 +226,8 @@ def summary_dict(run) -> dict:
     "shape_rms_error_mm", "distance_to_bfp_rms_mm", "residual_percent", "iterations",
     "time_s", "mesh_file", "label", "converged", "scales", "status", "failure",
     "noise_percent", "residual_to_noise", "scale_reports", "shape_std_median_mm",
-    "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm", "noise_variance",
+    "shape_std_max_mm", "shape_bias_median_mm", "shape_bias_max_mm",
+    "shape_uncertainty_median_mm", "shape_uncertainty_max_mm", "noise_variance",
     "levels_chosen", "regularization", "dropped_dofs", "n_valid", "valid_share"}]}``, plus
     ``"specimen"`` (the frame and surface fit) for ``[geometry] kind = "roi"``. ``dropped_dofs``
     (georeg): per spline level solved at, ``{"n_dofs", "dropped", "unseen_mesh", "unseen_images",
@@ -249,8 +250,7 @@ def summary_dict(run) -> dict:
             "distance_to_bfp_rms_mm": None, "residual_percent": None, "noise_percent": None,
             "residual_to_noise": None, "iterations": None, "time_s": None, "mesh_file": None,
             "converged": False, "scale_reports": [],
-            "shape_std_median_mm": None, "shape_std_max_mm": None,
-            "shape_bias_median_mm": None, "shape_bias_max_mm": None, "noise_variance": None,
+            **_uncertainty_entry(None),                       # null without a measurement
             "levels_chosen": _levels_chosen(result),
             "regularization": getattr(result, "regularization", None),
             "dropped_dofs": getattr(result, "dropped_dofs", None), "n_valid": None, "valid_share": None,
@@ -296,9 +296,10 @@ def seen_fraction(measurement, n_elements: int) -> np.ndarray:
 def write_method_vtu(path: str | os.PathLike, result) -> Path:
     """VTU of the measured surface (world frame, mm) with point data
     ``shape_correction_mm`` (q, along the nominal normals), ``distance_to_bfp_mm``, and when
-    known ``shape_error_mm``, ``shape_std_mm`` (standard deviation from the image noise) and
-    ``shape_bias_mm`` (the bias indicator), ``valid``, ``residual_to_noise``; the cell data ``seen_fraction`` (the share of
-    each element's integration points at the finest scale that entered the residual: seen
+    known ``shape_error_mm``, ``shape_std_mm`` (std from the image noise), ``shape_bias_mm``
+    (the bias indicator), ``shape_uncertainty_mm`` (their root sum of squares), ``valid``,
+    ``residual_to_noise``; the cell data ``seen_fraction`` (the share of each element's
+    integration points at the finest scale that entered the residual: seen
     by both cameras, not hidden, not grazing, not in the edge margin; 0 where the shape is
     only carried by the regularization) and, for a part of several faces, ``face`` (each
     element's face index), the point data ``node_face``, ``face_uv`` (each node's face and
@@ -308,12 +309,10 @@ def write_method_vtu(path: str | os.PathLike, result) -> Path:
     mesh = result.mesh.with_nodes(np.asarray(m.nodes, float))
     point_data = {"shape_correction_mm": np.asarray(m.q, float), **(getattr(m, "validity", None) and m.validity.point_data() or {}),
                   "distance_to_bfp_mm": np.asarray(result.distance_to_bfp_mm, float)}
-    errors = getattr(result, "shape_error_mm", None)
-    if errors is not None:
-        point_data["shape_error_mm"] = np.asarray(errors, float)
-    for name in ("shape_std_mm", "shape_bias_mm"):
-        if getattr(m, name, None) is not None:
-            point_data[name] = np.asarray(getattr(m, name), float)
+    for source, name in ((result, "shape_error_mm"), (m, "shape_std_mm"), (m, "shape_bias_mm"),
+                         (m, "shape_uncertainty_mm")):
+        if getattr(source, name, None) is not None:
+            point_data[name] = np.asarray(getattr(source, name), float)
     cell_data = {"seen_fraction": seen_fraction(m, mesh.n_elements)}
     face = getattr(result, "element_face", None)               # a part of several faces
     if face is not None:

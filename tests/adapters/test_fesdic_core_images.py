@@ -74,3 +74,12 @@ def test_automatic_level_is_not_worse_than_fe_on_a_short_feature(bump_scene):
     assert geo.converged and geo.scales[-1].residual_percent == pytest.approx(geo.residual_percent)
     assert geo.shape_std_mm is not None and np.all(np.isfinite(geo.shape_std_mm))
     assert geo.state.H.shape == (model.mesh.n_nodes,) * 2 and geo.noise.variance > 0
+    # the search chose by its estimate of the shape error (bias and noise at the nodes):
+    # the chosen level's estimate is that of an error of the measured size
+    chosen = [t for t in search.trials if t.chosen]
+    assert len(chosen) == 1 and chosen[0].level == search.chosen
+    assert 0.0 < chosen[0].std_mm <= chosen[0].error_mm
+    assert 0.5 * geo_error <= chosen[0].error_mm <= 2.0 * geo_error, (chosen[0], geo_error)
+    # its combined uncertainty covers the error at most nodes (|error| <= 2 uncertainty)
+    covered = np.abs(bounded_shape_error(geo.nodes, bump_scene.specimen)) <= 2 * geo.shape_uncertainty_mm
+    assert covered.mean() >= 0.9, covered.mean()

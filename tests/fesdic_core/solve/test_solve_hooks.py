@@ -99,6 +99,7 @@ def test_the_shape_driver_calls_the_hooks_a_solver_has(twisted_scene):
     assert solver.covariances == [0]
     assert m.shape_std_mm is not None and np.all(np.isfinite(m.shape_std_mm))
     assert m.shape_bias_mm is None                     # no bias_step: no bias indicator
+    np.testing.assert_array_equal(m.shape_uncertainty_mm, m.shape_std_mm)   # the std alone
 
 
 def test_shape_std_is_none_for_a_solver_without_step_covariance():

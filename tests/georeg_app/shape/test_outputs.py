@@ -26,7 +26,10 @@ EXTRA = {"label": str, "converged": bool, "scales": list, "status": str,
          # issue 22: what each georeg level dropped on a non-rectangular outline
          "dropped_dofs": (dict, type(None)),
          # issue 27: the nodes valid locally (null without the local checks)
-         "n_valid": (int, type(None)), "valid_share": (float, type(None))}
+         "n_valid": (int, type(None)), "valid_share": (float, type(None)),
+         # issue 23: one uncertainty a user can read (the std and the bias combined)
+         "shape_uncertainty_median_mm": (float, type(None)),
+         "shape_uncertainty_max_mm": (float, type(None))}
 
 
 def _tiny_figures():
