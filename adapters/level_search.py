@@ -10,17 +10,13 @@
    the nodes, bias plus noise, modulo the rigid normal motions: the change to the finest
    level of the ladder, de-biased by that change's known noise, plus the level's own noise
    (Stein's unbiased risk estimate in the metric of the node values). The level of least
-   estimated error is iterated from its predicted optimum; both levels' errors estimated
-   again from its converged system decide, and the prediction is renewed from there. A level
-   is iterated at most once. The search looks ahead (it does not stop on a level that adds
-   too little when a finer one holds a feature) and moves both ways (it leaves the start for
-   a coarser level when the start's extra dofs only fit noise, as on a flat plate). Below
-   the nominal spline, the search also looks at the bilinear level of its parameter domain
-   (:func:`~georeg_plugin.spline.refine.linear_patch`: nested in every level, 4 dofs of
-   which 3 are the rigid normal motions of a plane), so that a flat specimen is not left
-   with the biquadratic nominal's 6 other dofs of noise. The Hannan-Quinn criterion of
-   :mod:`georeg_plugin.levels.selection` is still recorded per level (``criterion``,
-   ``gain``): it answers which level is true, not which estimate is closest.
+   estimated error is iterated from its predicted optimum; both levels' errors, estimated
+   again from its converged system, decide; the prediction is renewed from there. A level
+   is iterated at most once. The search looks ahead and moves both ways. Below the nominal
+   spline it also looks at the bilinear level of its parameter domain
+   (:func:`~georeg_plugin.spline.refine.linear_patch`, 4 dofs of which 3 are a plane's rigid
+   normal motions): a flat specimen is not left with the nominal's other dofs of noise. The
+   Hannan-Quinn criterion (:mod:`georeg_plugin.levels.selection`) is still recorded.
 3. If another level was chosen: the search's last Gauss-Newton is the measurement, and the
    core's :func:`~fesdic_core.shape.driver.conclude` gives its verdict and uncertainty. With
    calibration by the joint Gauss-Newton (``coupling = "joint"``), each level is iterated on
@@ -68,7 +64,8 @@ from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["LevelSearch", "below_nominal", "ladder", "measure_auto_levels", "seen_level_dofs"]
+__all__ = ["LevelSearch", "below_nominal", "fixed_level", "ladder", "measure_auto_levels",
+           "seen_level_dofs"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -244,6 +241,17 @@ def effective_variance(state, kappa: float, finest_step: np.ndarray | None, fine
         return kappa
     misfit = (fall_fe - float(np.dot(state.b, finest_step))) / added
     return max(kappa, misfit)
+
+
+def fixed_level(space: MultilevelSpace, model: NominalModel, level: int,
+                scales: Sequence[int]) -> GeometricRegularization:
+    """georeg held at ``level`` of the search's ladder at the finest image scale, one level
+    coarser per coarser scale, never coarser than the nominal (the search's own start
+    schedule): the oracle a level choice is measured against."""
+    nominal = space.n_levels - 1 - below_nominal(space, model)
+    finest = min(scales)
+    return GeometricRegularization(space, {s: max(level, min(level + s - finest, nominal))
+                                           for s in scales})
 
 
 def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray,

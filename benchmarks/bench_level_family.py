@@ -51,12 +51,11 @@ from bench_levels import Case, render  # noqa: E402
 from shape_truth import bounded_shape_error, rms  # noqa: E402
 
 from adapters.fesdic_core import nominal_model  # noqa: E402
-from adapters.level_search import below_nominal, ladder, measure_auto_levels  # noqa: E402
+from adapters.level_search import fixed_level, ladder, measure_auto_levels  # noqa: E402
 from fesdic_core.shape.driver import MeasurementSettings, measure  # noqa: E402
 from fesdic_core.solve.tikhonov import TikhonovSolver  # noqa: E402
 from fesdic_core.synthetic.render import speckle_mm_for  # noqa: E402
 from fesdic_core.synthetic.specimen import Specimen  # noqa: E402
-from georeg_plugin.levels.solver import GeometricRegularization  # noqa: E402
 from georeg_plugin.spline.geometries import plate_with_hole, rectangle  # noqa: E402
 
 FAMILY = scenes.FAMILY_DEMO_SCALE
@@ -112,15 +111,6 @@ def build_cases(args) -> list[tuple[Case, dict]]:
     return cases
 
 
-def fixed_level_solver(space, model, level: int) -> GeometricRegularization:
-    """georeg at ``level`` of the ladder at the finest scale, one level coarser per coarser
-    image scale (never below the nominal, as the search's start)."""
-    nominal = space.n_levels - 1 - below_nominal(space, model)
-    finest = SETTINGS.scales[-1]
-    return GeometricRegularization(space, {s: max(level, min(level + s - finest, nominal))
-                                           for s in SETTINGS.scales})
-
-
 def run_case(case: Case, images) -> dict:
     truth, mesh, cams = case.specimen, case.model.mesh, case.cameras
     plain = dataclasses.replace(case.settings, uncertainty=False)
@@ -136,7 +126,7 @@ def run_case(case: Case, images) -> dict:
     space = ladder(case.model, None, linear=True)
     fixed = {}
     for level in range(space.n_levels):
-        m = measure(mesh, images, cams, fixed_level_solver(space, case.model, level), plain)
+        m = measure(mesh, images, cams, fixed_level(space, case.model, level, SETTINGS.scales), plain)
         fixed[level] = (error(m), int(space.operators[level].shape[0]))
     row["fixed"] = fixed
     t0 = time.perf_counter()

@@ -58,6 +58,8 @@ as the predicted std with calibration is; ``t`` the truth's normal offset at the
   Gaussian errors with the predicted spread and no bias give 95.4 %; target 90-98 %.
 - ``covN``: the same against the seeds' mean, ``|q_k - mean_k q| <= 2 std_k``: bias removed.
 - ``cov+b``: ``|q_k - t| <= 2 std_k + |bias indicator_k|``.
+- ``covU``: ``|q_k - t| <= 2 u_k`` with the combined uncertainty ``u = sqrt(std^2 + bias
+  indicator^2)`` (``Measurement.shape_uncertainty_mm``); target 90-98 %.
 - ``std``: mean over the nodes of the predicted std (median over the seeds); ``emp``: mean
   over the nodes of the empirical std (um).
 - ``bias``: mean over the nodes of ``|mean_k q - t|`` (um), the error common to every
@@ -318,6 +320,7 @@ def summarise(setup: Setup, key, runs: list, clean_run) -> dict:
         if all(r["bias"] is not None for r in good):
             B = np.array([r["bias"] for r in good])
             row.update(covB=np.mean(np.abs(err) <= 2 * S + B),
+                       covU=np.mean(np.abs(err) <= 2 * np.hypot(S, B)),
                        bi=np.median(B.mean(axis=1)))
     if clean_run is not None:
         e0 = modulo_rigid(setup, clean_run["q"], calibrate) - truth
@@ -329,7 +332,8 @@ def summarise(setup: Setup, key, runs: list, clean_run) -> dict:
 COLUMNS = [("scene", "scene", "{}", 6), ("method", "method", "{}", 14), ("cal", "cal", "{}", 3),
            ("level", "dofs", "{}", 7), ("ok", "ok", "{}", 3), ("pred_emp", "pred/emp", "{:.2f}", 8),
            ("cov", "cov%", "{:.1%}", 6), ("covN", "covN%", "{:.1%}", 6),
-           ("covB", "cov+b%", "{:.1%}", 6), ("std", "std", "{:.3f}", 6), ("emp", "emp", "{:.3f}", 6),
+           ("covB", "cov+b%", "{:.1%}", 6), ("covU", "covU%", "{:.1%}", 6),
+           ("std", "std", "{:.3f}", 6), ("emp", "emp", "{:.3f}", 6),
            ("bias", "bias", "{:.3f}", 6), ("bias_noise", "(+-)", "{:.3f}", 6), ("bi", "|bi|", "{:.3f}", 6),
            ("rms", "rms", "{:.3f}", 6), ("err0", "err0", "{:.3f}", 6), ("k_k2", "k/k2", "{:.2f}", 5),
            ("k0_k2", "k0/k2", "{:.2f}", 5), ("time", "t s", "{:.1f}", 5)]
