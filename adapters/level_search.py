@@ -52,7 +52,7 @@ from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.multipatch import part_space
 from georeg_plugin.levels.operators import MultilevelSpace, gluing_matrix, nested_space
-from georeg_plugin.levels.risk import estimated_risk, node_metric
+from georeg_plugin.levels.risk import level_risks, node_metric, shape_variance
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
                                             predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
@@ -328,8 +328,8 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
             traces.update({other: metric.trace(*GeometricRegularization(space, {finest: other})
                                                .step_covariance(state.H, finest))
                            for other in range(n_levels)})
-        risks = {other: estimated_risk(moves[other] - moves[0], traces[other], traces[0],
-                                       variance, metric) for other in range(n_levels)}
+        in_nodes = shape_variance(state.H, state.b, moves[0], traces[0], variance, metric)
+        risks = level_risks(moves, traces, in_nodes, metric)
         return moves, variance, risks
 
     def record(other: int, state, chi: float, reference: tuple, variance: float, risks: dict,
