@@ -21,7 +21,7 @@ DOCS = ROOT / "docs"
 CHANGELOG = DOCS / "changelog.md"
 #: the two commands a fresh clone needs, as CI runs the second one
 DEMO_COMMAND = "python -m pip install -e . && georeg demo --out demo_out"
-TEST_COMMAND = 'python -m pip install -e ".[test,pyxel,cad]" && python -m pytest -q -n 2'
+TEST_COMMAND = 'python -m pip install -e ".[test,pyxel,cad]" && python -m pytest -q -n 2 --dist loadfile'
 HISTORY = re.compile(r"\b(stop|issue) \d+\b", re.IGNORECASE)
 
 
