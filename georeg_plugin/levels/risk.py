@@ -24,9 +24,10 @@ estimate, C. M. Stein, Ann. Statist. 9, 1981, 1135-1151; Mallows' Cp, Technometr
 exact in expectation when the reference level ``r`` holds the truth. Every finer level
 serves as a reference and the largest bias estimate counts (:func:`level_risks`): the finest
 level holds the most of the truth, but its noise can hide a bias that a less noisy finer
-level shows (a bias below a reference's noise is clipped to zero). ``M = W - W U (U^T W U)^-1 U^T W`` with
-``W`` the nodes' area weights over their sum and ``U`` the rigid normal modes: the
-W-orthogonal projection out of the rigid motions, then the weighted mean square.
+level shows (a bias below a reference's noise is clipped to zero).
+``M = W - W U (U^T W U)^-1 U^T W`` with ``W`` the nodes' area weights over their sum and
+``U`` the rigid normal modes: the W-orthogonal projection out of the rigid motions, then the
+weighted mean square.
 
 **The variance in the node metric.** ``v`` comes from the gray levels (the images' noise,
 or the share per dof of the image model's misfit, Eq. 7's metric). A misfit concentrated
@@ -47,7 +48,7 @@ import numpy as np
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
-from georeg_plugin.levels.support import ZERO_PIVOT
+from georeg_plugin.levels.solver import _seen_dofs
 
 __all__ = ["NodeMetric", "estimated_risk", "level_risks", "node_metric", "shape_variance"]
 
@@ -160,8 +161,7 @@ def shape_variance(H, b: np.ndarray, finest_step: np.ndarray, trace_finest: floa
     size in the node metric against the prediction scales the variance of every level.
     """
     H = sps.csc_matrix(H)
-    diag = np.abs(H.diagonal())
-    seen = diag > ZERO_PIVOT * (diag.max() if diag.size else 0.0)
+    seen = _seen_dofs(H)
     if not seen.any() or not variance > 0:
         return float(variance)
     lu = spla.splu(H[seen][:, seen])

@@ -90,7 +90,8 @@ def test_level_risks_keeps_the_bias_that_a_less_noisy_finer_level_shows():
     moves = {s: g @ b for s, g in enumerate(G)}
     risks = level_risks(moves, traces, v, metric)
     assert risks[0] == pytest.approx((v * traces[0],) * 2)
-    singles = [estimated_risk(moves[2] - moves[r], traces[2], traces[r], v, metric)[0] for r in (0, 1)]
+    singles = [estimated_risk(moves[2] - moves[r], traces[2], traces[r], v, metric)[0]
+               for r in (0, 1)]
     assert risks[2][0] == pytest.approx(max(singles))
     true_bias2 = metric.norm2(G[2] @ H @ q_true - q_true)
     # against the cubic level the bias is measured to 20 %, and that estimate is the one kept
