@@ -17,7 +17,7 @@ For a node metric ``|x|_M^2 = x^T M x`` the expected error of level ``s`` agains
 ``q*`` is ``|bias_s|_M^2 + v tr(M G_s)``, and the change to the finer reference level is an
 unbiased measure of the bias once its own noise is taken off (Stein's unbiased risk
 estimate, C. M. Stein, Ann. Statist. 9, 1981, 1135-1151; Mallows' Cp, Technometrics 15,
-1973, 661-675, written in the metric of the node values instead of that of the gray levels):
+1973, 661-675, written in the metric of the node values instead of that of the gray levels)::
 
     R_s = |q_s - q_r|_M^2 - v tr(M (G_r - G_s)) + v tr(M G_s)            (estimated risk)
 
