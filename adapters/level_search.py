@@ -3,16 +3,16 @@
 1. The paper's coarse-to-fine run (section 3.3): image scale ``s`` on spline level
    ``start + s`` of the whole ladder of nested levels, from the coarse nominal spline down
    to the spline the FE mesh is extracted from (``C_FE``, Eq. 17).
-2. At the finest image scale, the level moves while the estimated shape error falls
+2. At the finest image scale, the level moves to where the balancing principle points
    (:mod:`georeg_plugin.levels.risk`): from the converged Gauss-Newton system, the optimum
    of every other level, finer or coarser, is predicted (Eq. 21 at the level: the levels are
-   nested, Eq. 13, no restart from scratch), and with it each level's expected RMS error at
-   the nodes, bias plus noise, modulo the rigid normal motions: the change to the finest
-   level of the ladder, de-biased by that change's known noise, plus the level's own noise
-   (Stein's unbiased risk estimate in the metric of the node values). The level of least
-   estimated error is iterated from its predicted optimum; both levels' errors, estimated
-   again from its converged system, decide; the prediction is renewed from there. A level
-   is iterated at most once. The search looks ahead and moves both ways. Below the nominal
+   nested, Eq. 13, no restart from scratch), and the coarsest level whose shape agrees with
+   every finer level's to within two standard deviations of their difference (in the node
+   metric, modulo the rigid normal motions) is iterated from its predicted optimum; the
+   prediction is renewed from its converged system. A level is iterated at most once: where
+   the search points to a level it has measured, it ends there. Each level's expected RMS
+   error at the nodes, bias plus noise, is estimated against the next finer level (Stein's
+   unbiased risk estimate in the metric of the node values). Below the nominal
    spline it also looks at the bilinear level of its parameter domain
    (:func:`~georeg_plugin.spline.refine.linear_patch`, 4 dofs of which 3 are a plane's rigid
    normal motions): a flat specimen is not left with the nominal's other dofs of noise. The
@@ -52,7 +52,8 @@ from fesdic_core.shape.uncertainty import linearised_state
 from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.multipatch import part_space
 from georeg_plugin.levels.operators import MultilevelSpace, gluing_matrix, nested_space
-from georeg_plugin.levels.risk import level_risks, node_metric, shape_variance
+from georeg_plugin.levels.risk import (agreement, balanced_level, level_risks, node_metric,
+                                       shape_variance)
 from georeg_plugin.levels.selection import (LevelTrial, information_criterion, noise_gain,
                                             predicted_fit)
 from georeg_plugin.levels.solver import GeometricRegularization
@@ -317,10 +318,10 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
     traces: dict = {}        # tr(M G_s) per unit noise: from the start's H (a variance: the few
     #                          per cent by which H changes between the levels do not matter)
 
-    def assess(state, q) -> tuple[dict, float, dict]:
+    def assess(state, q) -> tuple:
         """Every level's predicted optimum (Eq. 21 at the level, from the current system), the
-        noise variance, and every level's estimated shape error (:mod:`~georeg_plugin.levels.risk`,
-        against the finest level of the ladder)."""
+        noise variance, every level's estimated shape error and its agreement with the finer
+        levels (:mod:`~georeg_plugin.levels.risk`)."""
         moves = {other: _move_to(space, other, state.H, state.b, q, finest)
                  for other in range(n_levels)}
         variance = effective_variance(state, kappa, moves[0], seen_level_dofs(space, 0, state.H))
@@ -329,66 +330,62 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
                                                .step_covariance(state.H, finest))
                            for other in range(n_levels)})
         in_nodes = shape_variance(state.H, state.b, moves[0], traces[0], variance, metric)
-        risks = level_risks(moves, traces, in_nodes, metric)
-        return moves, variance, risks
+        return (moves, variance, level_risks(moves, traces, in_nodes, metric, reference="next"),
+                agreement(moves, traces, in_nodes, metric))
 
-    def record(other: int, state, chi: float, reference: tuple, variance: float, risks: dict,
+    def record(other: int, state, chi: float, reference: tuple, assessed: tuple,
                measured: bool) -> LevelTrial:
+        _, variance, risks, z = assessed
         trial = _trial(other, space, chi, reference, variance, residual_of(chi, state), measured,
                        state.n_points, state.H)
         risk, spread = risks[other]
         return dataclasses.replace(trial, error_mm=float(np.sqrt(risk)),
-                                   std_mm=float(np.sqrt(spread)))
+                                   std_mm=float(np.sqrt(spread)), agreement=float(z[other]))
 
-    level, q, state = start, first.q, first.state
-    moves, variance, risks = assess(state, q)
-    current = record(level, state, state.chi_square, (), variance, risks, True)
-    trials, iterations, visited, kept = [current], 0, {start}, None
+    level, q, state, cams = start, first.q, first.state, cams
+    assessed = assess(state, q)
+    current = record(level, state, state.chi_square, (), assessed, True)
+    trials, iterations, kept = [current], 0, None
+    visited = {start: (q, state, cams, current, kept, assessed)}   # the levels iterated
     while True:
         reference = (current.chi_square, current.dofs)
         predictions = [record(other, state, predicted_fit(state.chi_square, state.b, d, state.H),
-                              reference, variance, risks, False)
-                       for other, d in moves.items() if other not in visited]
+                              reference, assessed, False)
+                       for other, d in assessed[0].items() if other not in visited]
         trials += predictions
-        better = [t for t in predictions if t.error_mm < current.error_mm]
-        logger.info("level search: level %d (%d dofs) estimated error %.3g um; predicted %s "
-                    "(noise variance %.3g = %.3g kappa)", level, current.dofs,
-                    1e3 * current.error_mm,
-                    ", ".join(f"level {t.level}: {1e3 * t.error_mm:.3g} um" for t in predictions),
-                    variance, variance / kappa)
-        if not better:
+        target = balanced_level(assessed[3])
+        logger.info("level search: on level %d (%d dofs), estimated error %.3g um; agreement "
+                    "with the finer levels (std) %s: level %d", level, current.dofs,
+                    1e3 * current.error_mm, ", ".join(f"level {s}: {z:.3g}" for s, z in
+                                                      sorted(assessed[3].items())), target)
+        if target == level:
             break
-        best = min(better, key=lambda t: t.error_mm)               # the best predicted level
-        visited.add(best.level)
-        solver = GeometricRegularization(space, {finest: best.level})
+        if target in visited:               # measured already: the search ends there
+            level = target
+            q, state, cams, current, kept, assessed = visited[target]
+            break
+        solver = GeometricRegularization(space, {finest: target})
         if joint:            # the poses move with the shape: no second measurement at the end
-            shape = joint_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad,
+            shape = joint_gauss_newton(model.mesh.nodes, normals, q + assessed[0][target], quad,
                                        imgs, cams, solver, finest, stereo, nodal_areas(model.mesh),
                                        settings.normalisation, settings.max_joint_iter,
                                        settings.tol_mm * 2.0 ** finest,
                                        settings.fixed_point_tol_px, extra_mask=mask)
         else:
-            shape = shape_gauss_newton(model.mesh.nodes, normals, q + moves[best.level], quad,
+            shape = shape_gauss_newton(model.mesh.nodes, normals, q + assessed[0][target], quad,
                                        imgs, cams, solver, finest, settings.normalisation,
                                        settings.max_iter, settings.tol_mm * 2.0 ** finest,
                                        extra_mask=mask, keep_derivative=True)
         iterations += shape.iterations
-        trial_cams = list(shape.cameras) if joint else cams
-        trial_state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, trial_cams,
-                                       settings.normalisation, mask, residual=shape.residual)
-        # both levels' errors estimated again from the measured level's system: one state, so
-        # that the comparison is not one of two states' noise
-        trial_moves, trial_variance, trial_risks = assess(trial_state, shape.q)
-        measured = record(best.level, trial_state, trial_state.chi_square, reference,
-                          trial_variance, trial_risks, True)
-        trials.append(measured)
-        logger.info("level search: level %d measured: residual %.4f%%, estimated error %.3g um "
-                    "(level %d: %.3g um)", best.level, measured.residual_percent,
-                    1e3 * measured.error_mm, level, 1e3 * np.sqrt(trial_risks[level][0]))
-        if measured.error_mm >= np.sqrt(trial_risks[level][0]):
-            break
-        level, q, state, current, kept = best.level, shape.q, trial_state, measured, shape
-        moves, variance, risks, cams = trial_moves, trial_variance, trial_risks, trial_cams
+        cams = list(shape.cameras) if joint else cams
+        state = linearised_state(model.mesh.nodes, normals, shape.q, quad, imgs, cams,
+                                 settings.normalisation, mask, residual=shape.residual)
+        level, q, kept, assessed = target, shape.q, shape, assess(state, shape.q)
+        current = record(level, state, state.chi_square, reference, assessed, True)
+        trials.append(current)
+        visited[level] = (q, state, cams, current, kept, assessed)
+        logger.info("level search: level %d measured: residual %.4f%%", level,
+                    current.residual_percent)
     solver = GeometricRegularization(space, {finest: level})
     if level != start and (joint or not settings.calibrate):
         # the cameras are fixed, or moved by the joint steps: the search's last Gauss-Newton is

@@ -68,9 +68,12 @@ class LevelTrial:
     chosen : the level the search ended on.
     variance : the noise variance ``kappa`` of ``criterion`` and ``gain``.
     error_mm : the estimated RMS shape error at the nodes, bias and noise (mm; modulo the
-        rigid normal motions; :func:`~georeg_plugin.levels.risk.estimated_risk`): the level
-        search chooses the level where it is least.
+        rigid normal motions; :func:`~georeg_plugin.levels.risk.estimated_risk` against the
+        next finer level).
     std_mm : its noise part, ``sqrt(v tr(M G_s))`` (mm).
+    agreement : the largest change to a finer level in standard deviations of that change
+        (:func:`~georeg_plugin.levels.risk.agreement`): the search chooses the coarsest level
+        where it is at most 2.
     """
 
     level: int
@@ -84,6 +87,7 @@ class LevelTrial:
     variance: float = float("nan")
     error_mm: float = float("nan")
     std_mm: float = float("nan")
+    agreement: float = float("nan")
 
 
 def penalty_per_dof(n_points: int) -> float:
