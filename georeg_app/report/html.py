@@ -200,8 +200,8 @@ def _chosen(result) -> str:
 
 def level_search_html(run) -> str:
     """Per georeg method with automatic levels: the levels looked at, their dofs, residual,
-    information criterion (Hannan-Quinn) and the statistic (gain per added dof in units of the noise
-    variance)."""
+    agreement with the finer levels (standard deviations of the change), estimated RMS shape
+    error and its noise part (:mod:`georeg_plugin.levels.risk`)."""
     parts = []
     for r in run.results:
         search = getattr(r, "level_search", None)
@@ -209,18 +209,20 @@ def level_search_html(run) -> str:
             continue
         rows = "".join(
             f"<tr><td>{t.level}</td><td>{t.dofs}</td><td>{'measured' if t.measured else 'predicted'}"
-            f"</td><td>{_f(t.residual_percent)}</td><td>{_f(t.criterion, 7)}</td><td>{_f(t.gain, 3)}</td>"
+            f"</td><td>{_f(t.residual_percent)}</td><td>{_f(t.agreement, 3)}</td>"
+            f"<td>{_f(1e3 * t.error_mm, 3)}</td><td>{_f(1e3 * t.std_mm, 3)}</td>"
             f"<td>{'chosen' if t.chosen else ''}</td></tr>" for t in search.trials)
         parts.append(
             f"<h3>{html.escape(r.spec.label)}: level search</h3><p>Levels of the ladder "
             f"{search.n_levels} (0 = the spline of the FE mesh), start {search.start}, chosen "
             f"{search.chosen}; noise variance kappa {_f(search.variance)}; added time "
-            f"{_f(search.time_s, 3)} s. A level is taken when it lowers the Hannan-Quinn "
-            "information criterion: a finer one when its fall of the cost per added dof exceeds "
-            "2 ln ln N times the noise variance, a coarser one when its rise per removed dof stays "
-            "below it (N integration points; noise alone gives about 1).</p>"
-            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th><th>criterion</th>"
-            f"<th>gain per dof (kappa)</th><th></th></tr>{rows}</table>")
+            f"{_f(search.time_s, 3)} s. The coarsest level is taken whose shape agrees with every "
+            "finer level's to within 2 standard deviations of their change (RMS over the nodes, "
+            "modulo the rigid normal motions). The estimated error (bias and noise) is measured "
+            "against the next finer level.</p>"
+            "<table><tr><th>level</th><th>dofs</th><th></th><th>residual (%)</th>"
+            "<th>agreement (std)</th><th>estimated error (µm)</th><th>of which noise (µm)</th>"
+            f"<th></th></tr>{rows}</table>")
     return "".join(parts)
 
 

@@ -234,3 +234,22 @@ def test_every_method_failed_still_gives_a_report():
     page = report_html(run, out)
     assert "No best method: no method succeeded." in page and 'class="best"' not in page
     assert page.count('<tr class="failed">') == len(labels) and 'id="claims"' not in page
+
+
+def test_level_search_table_gives_each_level_s_agreement_and_estimated_error():
+    from types import SimpleNamespace
+
+    from adapters.level_search import LevelSearch
+    from georeg_app.report.html import level_search_html
+    from georeg_plugin.levels.selection import LevelTrial
+    trials = (LevelTrial(2, 120, 1.0, 2.0, 0.9, True, chosen=True, error_mm=5.77e-4,
+                         std_mm=5.77e-4, agreement=1.56),
+              LevelTrial(3, 48, 1.1, 2.1, 0.91, False, error_mm=1.023e-3, std_mm=3.48e-4,
+                         agreement=2.32))
+    run = SimpleNamespace(results=(SimpleNamespace(
+        spec=SimpleNamespace(label="georeg auto"), level_search=LevelSearch(
+            trials, chosen=2, start=2, n_levels=5, variance=1.8e-5, time_s=0.5)),))
+    rows = re.findall(r"<tr><td>.*?</tr>", level_search_html(run), re.S)
+    cells = [re.findall(r"<td>(.*?)</td>", r) for r in rows]
+    assert cells[0] == ["2", "120", "measured", "0.9", "1.56", "0.577", "0.577", "chosen"]
+    assert cells[1] == ["3", "48", "predicted", "0.91", "2.32", "1.02", "0.348", ""]
