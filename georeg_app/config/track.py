@@ -30,7 +30,10 @@ A complete example (optional keys show their default in parentheses)::
                                   # "previous": the last good frame's field (zero without
                                   # incremental); "zero"                  (default "features")
     tikhonov_length_mm = 10.0     # method = "tikhonov": length (mm) on each component (10)
-    levels = 2                    # method = "georeg": spline levels per component (2)
+    levels = "auto"               # method = "georeg": spline levels per component, or
+                                  # "auto": chosen on the first frame (the coarsest level
+                                  # that agrees with every finer one within 2 std of their
+                                  # change) and kept for the series     (default "auto")
     jacobian = "reference"        # "reference": modified Gauss-Newton, H of the reference
                                   # images built and factorized once per scale for every
                                   # iteration and frame; "current": full Gauss-Newton, H
@@ -69,9 +72,9 @@ from typing import Any
 from fesdic_core.displacement.driver import (DISPLACEMENT_MAX_INVALID_SHARE,
                                              DISPLACEMENT_PREFILTER_PX, JACOBIANS)
 
-from georeg_app.config.measure import (CamerasConfig, GeometryConfig, ImagesConfig, MethodConfig,
-                                       OutputConfig, cameras_table, geometry_table, images_table,
-                                       method_table, placed)
+from georeg_app.config.measure import (AUTO, CamerasConfig, GeometryConfig, ImagesConfig,
+                                       MethodConfig, OutputConfig, cameras_table, geometry_table,
+                                       images_table, integer_or_auto, method_table, placed)
 from georeg_app.config.toml_schema import (ConfigFileNotFoundError, Table, boolean, check, integer,
                                            load_toml, number, resolve_path, show, show_path, string)
 
@@ -106,7 +109,7 @@ class DisplacementConfig:
     scales: int = 3
     incremental: bool = True
     tikhonov_length_mm: float = 10.0
-    levels: int = 2
+    levels: int | str = AUTO
     jacobian: str = "reference"
     start: str = "features"
     prefilter_px: float = DISPLACEMENT_PREFILTER_PX
@@ -197,7 +200,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
         incremental=t.take("incremental", boolean, "true or false", default=d.incremental),
         tikhonov_length_mm=t.take("tikhonov_length_mm", number, "a number (mm)",
                                   default=d.tikhonov_length_mm),
-        levels=t.take("levels", integer, "an integer", default=d.levels),
+        levels=t.take("levels", integer_or_auto, 'an integer or "auto"', default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
         start=t.take("start", string, "a string", default=d.start),
         prefilter_px=t.take("prefilter_px", number, "a number (px)", default=d.prefilter_px),
@@ -208,7 +211,7 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
     check(t, "scales", c.scales, c.scales >= 1, ">= 1")
     check(t, "tikhonov_length_mm", c.tikhonov_length_mm, c.tikhonov_length_mm > 0, "> 0 (mm)")
-    check(t, "levels", c.levels, c.levels >= 1, ">= 1")
+    check(t, "levels", c.levels, c.levels == AUTO or c.levels >= 1, '>= 1 or "auto"')
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))
     check(t, "prefilter_px", c.prefilter_px, c.prefilter_px >= 0, ">= 0 (px; 0 = no prefilter)")

@@ -93,12 +93,15 @@ def track_summary(run) -> dict:
             "valid_share": None if f.valid is None else _finite(np.mean(f.valid)),
         })
     d = run.config.displacement
+    chosen = getattr(run, "levels", None)
     return _json_ready({
         "reference": run.reference_label,
         "displacement": {"method": d.method, "scales": list(d.scale_sequence),
                          "incremental": d.incremental,
                          "tikhonov_length_mm": d.tikhonov_length_mm if d.method == "tikhonov" else None,
-                         "levels": d.levels if d.method == "georeg" else None,
+                         "levels": (d.levels if chosen is None else chosen.levels)
+                         if d.method == "georeg" else None,
+                         "levels_chosen": None if chosen is None else chosen.as_dict(),
                          "jacobian": d.jacobian, "max_invalid_share": d.max_invalid_share},
         "n_nodes": int(run.mesh.n_nodes), "scheduler": run.scheduler, "time_s": float(run.time_s),
         "failed_frames": [f.index for f in run.frames if not f.ok],

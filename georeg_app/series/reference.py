@@ -32,7 +32,7 @@ from fesdic_core.solve.solvers import CachedFactorization, DirectSolver
 from georeg_plugin.io.spline_io import read_part_json, read_spline_json
 from georeg_plugin.levels.solver import GeometricRegularization
 
-from georeg_app.config.measure import Config, OutputConfig
+from georeg_app.config.measure import AUTO, Config, OutputConfig
 from georeg_app.config.track import REFERENCE_NOMINAL, TrackConfig
 from georeg_app.errors import InputError, MeasurementFailed
 from georeg_app.shape.methods import measure_specs
@@ -62,6 +62,11 @@ class SeriesReference:
     element_face: np.ndarray | None = None       # a CAD part's face of each element
     start: str = "previous"
     features: FeatureReference | None = None
+    #: with ``[displacement] levels = "auto"``: the nominal spline the levels are chosen in
+    #: (:func:`georeg_app.series.levels.with_chosen_levels`; dropped once they are)
+    levels_model: NominalModel | None = None
+    #: the record of that choice (:class:`~adapters.displacement_levels.DisplacementLevels`)
+    levels: object | None = None
 
 
 def _reference_images(config: TrackConfig, prefilter_px: float | None = None) -> tuple[Image, Image]:
@@ -138,6 +143,10 @@ def _part_model(nominal: Path, vtu: Path, mesh: SurfaceMesh) -> NominalModel:
                         face_names=tuple(names))
 
 
+#: the displacement's levels of a series' first measurement when they are chosen from the data
+START_LEVELS = 2
+
+
 def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | None = None,
                         tikhonov_length_mm: float = 10.0, levels: int = 2):
     """The step solver of a displacement method on the node-major dofs: None (plain FE),
@@ -179,7 +188,9 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     if d.prefilter_px != config.method.prefilter_px:     # the frames' image model
         images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)
-    solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm, d.levels)
+    auto = d.method == "georeg" and d.levels == AUTO
+    solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm,
+                                 START_LEVELS if auto else d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)
     features = feature_reference(reference) if d.start == "features" else None
@@ -187,4 +198,5 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
                            prefilter_px=d.prefilter_px, label=label,
                            interpolation_order=config.method.interpolation_order,
                            element_face=None if model is None else model.element_face,
-                           start=d.start, features=features)
+                           start=d.start, features=features,
+                           levels_model=model if auto else None)

@@ -1,0 +1,49 @@
+"""``[displacement] levels = "auto"``: the series' spline levels chosen on its first frame.
+
+The first frame is measured from its usual start (:func:`~georeg_app.series.frames.frame_start`)
+with :data:`~georeg_app.series.reference.START_LEVELS` levels, and the level is chosen from
+that measurement's Gauss-Newton system (:mod:`adapters.displacement_levels`); every frame of
+the series, the first included, is then measured on that one space.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+from adapters.displacement_levels import choose_displacement_levels
+from fesdic_core.imaging.image import read_image
+from fesdic_core.solve.solvers import CachedFactorization
+
+from georeg_app.config.track import TrackConfig
+from georeg_app.series.frames import frame_start
+from georeg_app.series.reference import START_LEVELS, SeriesReference, displacement_solver
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["with_chosen_levels"]
+
+
+def with_chosen_levels(reference: SeriesReference, config: TrackConfig) -> SeriesReference:
+    """``reference`` with its georeg solver on the levels chosen on the first frame (the
+    record in ``levels``); unchanged when its levels are fixed (no ``levels_model``).
+
+    An unreadable first frame raises as the frame would (``check_frames`` runs first); a
+    first frame that fails to measure keeps the start levels (logged)."""
+    model = reference.levels_model
+    if model is None or not config.series.cam0:
+        return dataclasses.replace(reference, levels_model=None)
+    paths = (config.series.cam0[0], config.series.cam1[0])
+    images = [read_image(p, prefilter_px=reference.prefilter_px,
+                         order=reference.interpolation_order) for p in paths]
+    U0, _ = frame_start(reference, 1, images, None)
+    record = choose_displacement_levels(model, reference.displacement, images, START_LEVELS,
+                                        frame=str(paths[0]), U0=U0)
+    d = config.displacement
+    solver = displacement_solver(d.method, reference.displacement.mesh, model,
+                                 d.tikhonov_length_mm, record.levels)
+    if d.jacobian == "reference":
+        solver = CachedFactorization(solver)
+    logger.info("displacement: %d spline levels per component, chosen on %s", record.levels,
+                paths[0])
+    return dataclasses.replace(reference, solver=solver, levels=record,
+                               levels_model=None)
