@@ -296,6 +296,11 @@ def main(argv=None) -> int:
             run = track(args.data, args.frames, method, Path(tmp))
             print(f"\n## {method}: exit {run['code']}, {run['time_s']:.0f} s in all (reference "
                   "shape included)", flush=True)
+            chosen = run["summary"].get("displacement", {}).get("levels_chosen")
+            if chosen:
+                print(f"levels chosen on {Path(chosen['frame']).name}: {chosen['levels']} (dofs "
+                      f"{chosen['dofs']}; agreement with the finer levels "
+                      f"{', '.join(f'{a:.3g}' for a in chosen['agreement'])} std)")
             print(f"{'frame':13s} {'status':7s} {'residual/noise %':>17s} {'valid':>6s} "
                   f"{'median U x, y, z (um)':>24s} {'e1, e2 (%)':>14s} {'time (s)':>8s} "
                   f"{'DICe z (um)':>11s}")

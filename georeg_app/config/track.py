@@ -31,7 +31,7 @@ A complete example (optional keys show their default in parentheses)::
                                   # incremental); "zero"                  (default "features")
     tikhonov_length_mm = 10.0     # method = "tikhonov": length (mm) on each component (10)
     levels = "auto"               # method = "georeg": spline levels per component, or
-                                  # "auto": chosen on the first frame (the coarsest level
+                                  # "auto": chosen on the last frame (the coarsest level
                                   # that agrees with every finer one within 2 std of their
                                   # change) and kept for the series     (default "auto")
     jacobian = "reference"        # "reference": modified Gauss-Newton, H of the reference

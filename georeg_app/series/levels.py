@@ -1,9 +1,11 @@
-"""``[displacement] levels = "auto"``: the series' spline levels chosen on its first frame.
+"""``[displacement] levels = "auto"``: the series' spline levels chosen on its last frame.
 
-The first frame is measured from its usual start (:func:`~georeg_app.series.frames.frame_start`)
+In a loading series the last frame is the most loaded, the one whose field has the most
+detail (chosen on the first frames of GT4, a sub-pixel motion where every level agrees with
+the noise, the choice fell to the coarsest level, 36 dofs). It is measured from its usual start (:func:`~georeg_app.series.frames.frame_start`)
 with :data:`~georeg_app.series.reference.START_LEVELS` levels, and the level is chosen from
 that measurement's Gauss-Newton system (:mod:`adapters.displacement_levels`); every frame of
-the series, the first included, is then measured on that one space.
+the series, that one included, is then measured on that one space.
 """
 from __future__ import annotations
 
@@ -24,18 +26,18 @@ __all__ = ["with_chosen_levels"]
 
 
 def with_chosen_levels(reference: SeriesReference, config: TrackConfig) -> SeriesReference:
-    """``reference`` with its georeg solver on the levels chosen on the first frame (the
+    """``reference`` with its georeg solver on the levels chosen on the last frame (the
     record in ``levels``); unchanged when its levels are fixed (no ``levels_model``).
 
-    An unreadable first frame raises as the frame would (``check_frames`` runs first); a
-    first frame that fails to measure keeps the start levels (logged)."""
+    An unreadable frame raises as the frame would (``check_frames`` runs first); a frame
+    that fails to measure keeps the start levels (logged)."""
     model = reference.levels_model
     if model is None or not config.series.cam0:
         return dataclasses.replace(reference, levels_model=None)
-    paths = (config.series.cam0[0], config.series.cam1[0])
+    paths = (config.series.cam0[-1], config.series.cam1[-1])
     images = [read_image(p, prefilter_px=reference.prefilter_px,
                          order=reference.interpolation_order) for p in paths]
-    U0, _ = frame_start(reference, 1, images, None)
+    U0, _ = frame_start(reference, len(config.series.cam0), images, None)
     record = choose_displacement_levels(model, reference.displacement, images, START_LEVELS,
                                         frame=str(paths[0]), U0=U0)
     d = config.displacement
