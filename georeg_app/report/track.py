@@ -155,6 +155,12 @@ def track_report_html(run) -> str:
                f"{run.mesh.n_nodes} nodes; displacement method {d.method}, image scales "
                f"{list(d.scale_sequence)}, {'incremental' if d.incremental else 'each from rest'}; "
                f"scheduler {run.scheduler}; {run.time_s:.1f} s.")
+    chosen = getattr(run, "levels", None)
+    if d.method == "georeg":
+        summary += (f" Spline levels per component: {d.levels}." if chosen is None else
+                    f" Spline levels per component: {chosen.levels}, chosen on "
+                    f"{Path(chosen.frame).name} (the coarsest level whose field agrees with "
+                    "every finer level's within 2 standard deviations of their change).")
     if failed:
         summary += f" {len(failed)} frame(s) FAILED ({', '.join(failed)}): greyed out."
     body = ["<h1>georeg track: displacement over a series of stereo pairs</h1>",

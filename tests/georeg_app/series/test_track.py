@@ -147,6 +147,8 @@ def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
     assert chosen["levels"] == summary["displacement"]["levels"] >= 1
     assert chosen["frame"].endswith("f1_cam0.png") and chosen["agreement"][-1] == 0.0
     assert len(chosen["agreement"]) == len(chosen["dofs"]) >= chosen["levels"]
+    assert (f"Spline levels per component: {chosen['levels']}, chosen on f1_cam0.png"
+            in (out / "report.html").read_text())
     vtu = meshio.read(out / frame["mesh_file"])
     truth = MOTIONS[0](vtu.points)
     rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - truth) ** 2, axis=0))
