@@ -189,7 +189,7 @@ def build(args) -> Setup:
     size = (360, 240) if args.quick else (480, 320)
     cameras = demo_cameras(image_size=size, field_mm=FIELD_MM)
     model = nominal_model(rectangle(*MESH_MM), ELEMENTS, "Q9")
-    space = ladder(model)
+    space = ladder(model, linear=True)      # the search's own ladder (its bilinear level too)
     normals = np.tile([0.0, 0.0, 1.0], (model.mesh.n_nodes, 1))   # the flat nominal's normals
     clean, truth = {}, {}
     for scene, waviness in (("twist", 0.0), ("wave", args.waviness_mm)):
