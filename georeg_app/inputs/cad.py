@@ -26,6 +26,7 @@ for ray casting against the part.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 from pathlib import Path
@@ -138,9 +139,23 @@ def cad_part(path: Path, faces: Sequence | None = None) -> tuple[CadFace, ...]:
     """The selected faces of a CAD file, with their trimming loops (``faces``: see
     :func:`cad_face_indices`), the faces that meet along an edge given the same knots there
     (:func:`~georeg_plugin.spline.conforming.conforming_faces`: the same surfaces, the loops stay
-    valid)."""
-    every = read_cad_faces(path)
-    chosen = [every[k] for k in cad_face_indices(path, faces, every)]
+    valid).
+
+    A run asks for its part several times (the configuration's check, the sizes, the model):
+    the result is kept for the file as it is (its path, size and modification time) and the
+    same ``faces`` (the faces are frozen), so the common refinement, most of a short run's
+    time on a part of several faces, is computed once."""
+    path = Path(path)
+    check_cad_file(path)
+    stat = path.stat()
+    return _cad_part(str(path.resolve()), stat.st_mtime_ns, stat.st_size,
+                     None if faces is None else tuple(faces))
+
+
+@functools.lru_cache(maxsize=8)
+def _cad_part(path: str, mtime_ns: int, size: int, faces: tuple | None) -> tuple[CadFace, ...]:
+    every = read_cad_faces(Path(path))
+    chosen = [every[k] for k in cad_face_indices(Path(path), faces, every)]
     if len(chosen) > 1:
         patches = conforming_faces([f.patch for f in chosen], [f.name for f in chosen])
         chosen = [dataclasses.replace(f, patch=g) for f, g in zip(chosen, patches)]

@@ -64,10 +64,11 @@ def half_resolution_rig():
     return config, full, cameras, [c.scaled(1) for c in cameras]
 
 
-def write_half_resolution_part(folder: Path) -> Path:
+def write_half_resolution_part(folder: Path, rig=None) -> Path:
     """specimen_part.toml on the half-resolution pair: images (float TIFF, the block means
-    exactly), cameras JSON, one image scale fewer, ``HALF_LEVELS`` spline levels."""
-    _, full, _, half = half_resolution_rig()
+    exactly), cameras JSON, one image scale fewer, ``HALF_LEVELS`` spline levels; ``rig``:
+    what :func:`half_resolution_rig` returned (None: computed here)."""
+    _, full, _, half = half_resolution_rig() if rig is None else rig
     for k, image in enumerate(full):
         cv2.imwrite(str(folder / f"cam{k}.tiff"), image.coarsen().values.astype(np.float32))
     write_cameras_json(folder / "cameras.json", half)
@@ -87,20 +88,26 @@ def write_half_resolution_part(folder: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def half_part(tmp_path_factory):
+def rig():
+    """:func:`half_resolution_rig`, once for the module (the pair read, the rig posed)."""
+    return half_resolution_rig()
+
+
+@pytest.fixture(scope="module")
+def half_part(tmp_path_factory, rig):
     folder = tmp_path_factory.mktemp("dic_challenge_half")
-    config = write_half_resolution_part(folder)
+    config = write_half_resolution_part(folder, rig)
     assert cli.main(["measure", str(config), "--out", str(folder / "out"), "--quiet"]) == 0
     part = analyse_part.load_part(folder / "out", config)
     return part, compare(part)
 
 
-def test_half_resolution_rig_sees_as_the_pyramid():
+def test_half_resolution_rig_sees_as_the_pyramid(rig):
     """Pixel centres at integers: one 2x2 block mean maps x -> (x - 0.5) / 2, in the rig
     (Camera.scaled) as in the images (Image.coarsen): the scaled cameras project the landmarks
     where the full ones do, converted; the landmarks' picked pixels, converted, reproject as
     well at half resolution as they do at full resolution (half the px)."""
-    config, full, cameras, half = half_resolution_rig()
+    config, full, cameras, half = rig
     X = np.array([lm.xyz_mm for lm in config.cameras.landmarks])
     picked = [np.array([getattr(lm, f"cam{k}_px") for lm in config.cameras.landmarks]) for k in (0, 1)]
     for k, (c, h) in enumerate(zip(cameras, half)):

@@ -109,6 +109,11 @@ def test_faces_that_split_the_crease_differently_are_coupled_and_measured_within
     errors = _georeg_within_5_um_and_best(config, scene)
     print("split crease, RMS errors (mm):", errors)            # pytest -s shows them
     monkeypatch.setattr(cad, "conforming_faces", lambda faces, names: list(faces))
+    # a file the run has not read (cad_part keeps each file's refined faces)
+    (folder / "uncoupled").mkdir()
+    write_iges(folder / "uncoupled" / "split.igs", _split_folded_nominal(),
+               names=["left_a", "left_b", "right"])
+    config = _part_config(folder, "uncoupled/split.igs")
     with pytest.raises(ValueError, match=r"split\.igs: face \d \('(left_a|left_b|right)'\) and face"):
         build_model(config.geometry, 2)
 
@@ -243,3 +248,17 @@ def test_swapped_images_that_make_the_shape_diverge_stop_at_the_coarse_scale(par
     assert "the shape diverged" in err, err
     assert ("the finer scales were not started" in err) == (coupling == "alternate"), err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_part_is_read_once_per_file_and_again_when_the_file_changes(tmp_path):
+    """cad_part keeps its refined faces for the file as it is: the same file and faces give
+    the same faces (no second common refinement); the file rewritten with other names is read
+    again; other faces of it are their own entry."""
+    from georeg_app.inputs.cad import cad_part
+    path = tmp_path / "split.igs"
+    write_iges(path, _split_folded_nominal(), names=["left_a", "left_b", "right"])
+    first = cad_part(path)
+    assert cad_part(path) is first and [f.name for f in first] == ["left_a", "left_b", "right"]
+    assert [f.name for f in cad_part(path, ["right", "left_a"])] == ["right", "left_a"]
+    write_iges(path, _split_folded_nominal(), names=["a", "b", "c_renamed"])
+    assert [f.name for f in cad_part(path)] == ["a", "b", "c_renamed"]
