@@ -2,10 +2,11 @@
 
 In a loading series the last frame is the most loaded, the one whose field has the most
 detail (chosen on the first frames of GT4, a sub-pixel motion where every level agrees with
-the noise, the choice fell to the coarsest level, 36 dofs). It is measured from its usual start (:func:`~georeg_app.series.frames.frame_start`)
-with :data:`~georeg_app.series.reference.START_LEVELS` levels, and the level is chosen from
-that measurement's Gauss-Newton system (:mod:`adapters.displacement_levels`); every frame of
-the series, that one included, is then measured on that one space.
+the noise, the choice fell to the coarsest level, 36 dofs). It is measured from its usual
+start (:func:`~georeg_app.series.frames.frame_start`) with
+:data:`~georeg_app.series.reference.START_LEVELS` levels, and the level is chosen from that
+measurement's Gauss-Newton system (:mod:`adapters.displacement_levels`); every frame of the
+series, that one included, is then measured on that one space.
 """
 from __future__ import annotations
 

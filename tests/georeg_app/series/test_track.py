@@ -133,10 +133,11 @@ def test_track_with_a_region_of_interest_as_the_reference_geometry(series, tmp_p
 def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
     """`georeg track` of the first frame with the reference shape measured here (``extra``:
     the [cameras], [geometry] and [method] tables) and the georeg displacement with its
-    levels chosen on that frame (the last, the default): the frame is ok, its displacement within 1.5 um
-    in plane and 6 um out of plane of the truth, and the choice is recorded in summary.json
-    (the levels the series ran on, the frame it was made on, one agreement per level, the
-    finest level agreeing with itself). Returns the summary and the frame's VTU."""
+    levels chosen on that frame (the last, the default): the frame is ok, its displacement
+    within 1.5 um in plane and 6 um out of plane of the truth, and the choice is recorded in
+    summary.json (the levels the series ran on, the frame it was made on, one agreement per
+    level, the finest level agreeing with itself). Returns the summary and the frame's
+    VTU."""
     config = _config(folder, series_keys='cam0 = ["frames/f1_cam0.png"]\ncam1 = ["frames/f1_cam1.png"]',
                      extra=extra, displacement='method = "georeg"')
     assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
