@@ -13,13 +13,15 @@ waviness needs finer levels. The choice follows the shape's (:mod:`adapters.leve
    level): ``d_s = G_s (b + H u) - u``.
 3. The noise variance ``v`` of ``Cov(b) = v H`` is measured on the dofs that the FE mesh
    adds beyond the finest level (they hold no displacement, only noise and the image
-   model's misfit): ``v = b^T (H^-1 - G_0) b / (n_FE - m_0)``, unbiased for pure noise.
+   model's misfit): ``v = b^T (H^-1 - G_0) b / (n_FE - m_0)``, unbiased for pure noise
+   (:func:`~adapters.level_search.effective_variance`).
 4. The coarsest level whose field agrees with every finer level's to within two standard
    deviations of their change (node metric: area-weighted mean square over the nodes and
    the three components) is the series' level (:func:`~georeg_plugin.levels.risk.agreement`,
    the balancing principle).
 
-A series stays on one space: the level is chosen from its first frame and kept.
+A series stays on one space: the level is chosen on one frame and kept
+(:func:`georeg_app.series.levels.with_chosen_levels` takes the series' last).
 """
 from __future__ import annotations
 
@@ -29,17 +31,15 @@ from typing import Sequence
 
 import numpy as np
 import scipy.sparse as sps
-import scipy.sparse.linalg as spla
 
 from fesdic_core.displacement.driver import DisplacementReference, measure_displacement
 from fesdic_core.fe.mesh import nodal_areas
-from fesdic_core.solve.solvers import seen_dofs
 from georeg_plugin.levels.risk import (AGREEMENT_TOLERANCE, agreement, balanced_level,
                                        level_risks, node_metric)
 from georeg_plugin.levels.solver import GeometricRegularization
 
 from adapters.fesdic_core import NominalModel, displacement_space
-from adapters.level_search import seen_level_dofs
+from adapters.level_search import effective_variance, seen_level_dofs
 
 logger = logging.getLogger(__name__)
 
@@ -137,12 +137,8 @@ def choose_displacement_levels(model: NominalModel, reference: DisplacementRefer
     solvers = [GeometricRegularization(ladder, {finest: j}) for j in range(top)]
     rhs = b + H @ u
     moves = {j: s.solve(H, rhs, u, finest) - u for j, s in enumerate(solvers)}
-    seen = seen_dofs(H)
-    lu = spla.splu(sps.csc_matrix(H[seen][:, seen]))
-    fall_fe = float(b[seen] @ lu.solve(b[seen]))
-    added = int(np.count_nonzero(seen)) - seen_level_dofs(ladder, 0, H)
-    step0 = solvers[0].solve(H, b, u, finest)                    # G_0 b
-    variance = (fall_fe - float(b @ step0)) / added if added > 0 else float("nan")
+    # u lies in the finest level (the levels are nested, Eq. 13): moves[0] = G_0 b
+    variance = effective_variance(H, b, 0.0, moves[0], seen_level_dofs(ladder, 0, H))
     metric = node_metric(np.repeat(nodal_areas(reference.mesh), 3))
     traces = {j: metric.trace(*s.step_covariance(H, finest)) for j, s in enumerate(solvers)}
     z = agreement(moves, traces, variance, metric)

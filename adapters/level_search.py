@@ -222,7 +222,8 @@ def _trial(level: int, space: MultilevelSpace, chi_square: float, reference: tup
                       if reference else float("nan"), variance=variance)
 
 
-def effective_variance(state, kappa: float, finest_step: np.ndarray | None, finest_dofs: int) -> float:
+def effective_variance(H, b: np.ndarray, kappa: float, finest_step: np.ndarray | None,
+                       finest_dofs: int) -> float:
     """The noise variance of the criterion: ``kappa`` of the images, or more if the data say so.
 
     The image model's misfit (interpolation of the finest texture, a render's or a
@@ -231,16 +232,17 @@ def effective_variance(state, kappa: float, finest_step: np.ndarray | None, fine
     noise. Its share per dof is measured where no shape is expected, on the dofs that the
     FE mesh adds beyond the finest spline level (elements of 16 px or more; like the
     finest wavelet coefficients in wavelet shrinkage): ``(fall to FE - fall to the finest
-    spline) / (FE dofs - spline dofs)``, predicted from the current system.
+    spline) / (FE dofs - spline dofs)``, predicted from the current system ``(H, b)`` (Eq. 8;
+    ``finest_step`` the step to the finest level's optimum, ``finest_dofs`` its seen dofs).
     """
-    seen = seen_dofs(state.H)
+    seen = seen_dofs(H)
     if finest_step is None or not seen.any():
         return kappa
-    fall_fe = float(state.b[seen] @ spla.splu(sps.csc_matrix(state.H[seen][:, seen])).solve(state.b[seen]))
+    fall_fe = float(b[seen] @ spla.splu(sps.csc_matrix(H[seen][:, seen])).solve(b[seen]))
     added = int(np.count_nonzero(seen)) - int(finest_dofs)
     if added <= 0:
         return kappa
-    misfit = (fall_fe - float(np.dot(state.b, finest_step))) / added
+    misfit = (fall_fe - float(np.dot(b, finest_step))) / added
     return max(kappa, misfit)
 
 
@@ -324,7 +326,8 @@ def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence
         levels (:mod:`~georeg_plugin.levels.risk`)."""
         moves = {other: _move_to(space, other, state.H, state.b, q, finest)
                  for other in range(n_levels)}
-        variance = effective_variance(state, kappa, moves[0], seen_level_dofs(space, 0, state.H))
+        variance = effective_variance(state.H, state.b, kappa, moves[0],
+                                      seen_level_dofs(space, 0, state.H))
         if not traces:
             traces.update({other: metric.trace(*GeometricRegularization(space, {finest: other})
                                                .step_covariance(state.H, finest))
