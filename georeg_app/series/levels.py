@@ -13,7 +13,9 @@ from __future__ import annotations
 import dataclasses
 import logging
 
-from adapters.displacement_levels import choose_displacement_levels
+import numpy as np
+
+from adapters.displacement_levels import DisplacementLevels, choose_displacement_levels
 from fesdic_core.imaging.image import read_image
 from fesdic_core.solve.solvers import CachedFactorization
 
@@ -31,16 +33,23 @@ def with_chosen_levels(reference: SeriesReference, config: TrackConfig) -> Serie
     record in ``levels``); unchanged when its levels are fixed (no ``levels_model``).
 
     An unreadable frame raises as the frame would (``check_frames`` runs first); a frame
-    that fails to measure keeps the start levels (logged)."""
+    that fails to measure, or raises while measured, keeps the start levels (logged)."""
     model = reference.levels_model
     if model is None or not config.series.cam0:
         return dataclasses.replace(reference, levels_model=None)
     paths = (config.series.cam0[-1], config.series.cam1[-1])
     images = [read_image(p, prefilter_px=reference.prefilter_px,
                          order=reference.interpolation_order) for p in paths]
-    U0, _ = frame_start(reference, len(config.series.cam0), images, None)
-    record = choose_displacement_levels(model, reference.displacement, images, START_LEVELS,
-                                        frame=str(paths[0]), U0=U0)
+    try:
+        U0, _ = frame_start(reference, len(config.series.cam0), images, None)
+        record = choose_displacement_levels(model, reference.displacement, images, START_LEVELS,
+                                            frame=str(paths[0]), U0=U0)
+    except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+        # as measure_frame: an error in the measurement is that frame's failure, not the run's
+        logger.warning("displacement levels: kept %d (%s failed: %s)", START_LEVELS, paths[0],
+                       " ".join(str(err).split()) or type(err).__name__)
+        record = DisplacementLevels(START_LEVELS, START_LEVELS, (), (), (), (), float("nan"),
+                                    str(paths[0]))
     d = config.displacement
     solver = displacement_solver(d.method, reference.displacement.mesh, model,
                                  d.tikhonov_length_mm, record.levels)

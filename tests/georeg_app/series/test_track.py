@@ -400,3 +400,23 @@ def test_the_reference_and_every_frame_are_read_with_the_configured_image_model(
     assert seen == [("a.png", 0.7, 5), ("c.png", 0.7, 5)]
     defaults = {f.name: f.default for f in dataclasses.fields(reference.SeriesReference)}
     assert defaults["interpolation_order"] == 3
+
+
+def test_automatic_levels_chosen_on_a_frame_that_fails_keep_the_start_levels(series, tmp_path):
+    """The last frame is the failing one of the series (no texture): the level choice made
+    on it keeps the start's 2 levels, records no agreement, and the series goes on: the
+    good frame ok, the bad one failed, as with fixed levels."""
+    folder, _ = series
+    keys = ('cam0 = ["frames/f1_cam0.png", "frames/f3_cam0.png"]\n'
+            'cam1 = ["frames/f1_cam1.png", "frames/f3_cam1.png"]')
+    out = tmp_path / "out"
+    extra = ('[cameras]\nfile = "cameras.json"\n[geometry]\nkind = "rectangle"\n'
+             'length_mm = 44.0\nwidth_mm = 30.0\nelements = 16\n[method]\nname = "fe"\n'
+             'calibrate = false\nscales = 2')
+    config = _config(folder, series_keys=keys, extra=extra, displacement='method = "georeg"')
+    assert cli.main(["-q", "track", str(config), "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [f["status"] for f in summary["frames"]] == ["ok", "failed"]
+    chosen = summary["displacement"]["levels_chosen"]
+    assert chosen["levels"] == summary["displacement"]["levels"] == 2
+    assert chosen["agreement"] == [] and chosen["frame"].endswith("f3_cam0.png")
