@@ -54,15 +54,15 @@ from fesdic_core.displacement.settings import (DISPLACEMENT_MAX_INVALID_SHARE,
 from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
                                                displacement_operators, displacement_residual,
                                                displacement_rhs, reference_view)
+from fesdic_core.displacement.uncertainty import DisplacementUncertainty, displacement_uncertainty
 from fesdic_core.displacement.validity import displacement_validity, residual_blocks
+from fesdic_core.displacement.verdict import displacement_verdict, noise_floor
 from fesdic_core.fe.mesh import SurfaceMesh
 from fesdic_core.fe.quadrature import pixel_quadrature
 from fesdic_core.imaging.image import Image, pyramid
-from fesdic_core.imaging.noise import MIN_TEXTURE_RATIO, residual_noise_floor
 from fesdic_core.residual.validity import NodeValidity
 from fesdic_core.shape.operators import GaussNewtonLog
 from fesdic_core.shape.settings import ScaleReport
-from fesdic_core.shape.verdict import judge
 from fesdic_core.solve.gauss_newton import damped_gauss_newton, predicted_change
 from fesdic_core.solve.solvers import CachedFactorization, DirectSolver, StartScaleHook, StepSolver
 
@@ -209,7 +209,9 @@ class DisplacementMeasurement:
     ``converged``: no failure and every scale stagnated. ``U`` (n, 3) node-major.
     ``validity``: the local checks of every node at the finest scale
     (:func:`~fesdic_core.displacement.validity.displacement_validity`), whose :attr:`valid`
-    and :attr:`residual_to_noise` are the measurement's.
+    and :attr:`residual_to_noise` are the measurement's. ``uncertainty``: the field's
+    standard deviation and bias indicator per node and component
+    (:mod:`fesdic_core.displacement.uncertainty`; None if ``settings.uncertainty`` is off).
     """
 
     U: np.ndarray
@@ -224,6 +226,7 @@ class DisplacementMeasurement:
     failure: str | None = None
     scales: tuple = ()
     validity: NodeValidity | None = field(default=None, repr=False)
+    uncertainty: DisplacementUncertainty | None = field(default=None, repr=False)
 
     @property
     def residual_percent(self) -> float:
@@ -255,48 +258,6 @@ class DisplacementMeasurement:
         total = quad.to_nodes(np.where(seen, quad.weight_mm2 * np.nan_to_num(p), 0.0))
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(weight > 0, total / np.where(weight > 0, weight, 1.0), np.nan)
-
-
-def _noise_floor(ref: ReferenceView, res: DisplacementResidual, images: Sequence):
-    """Per camera, the residual the two images' noise explains (percent of the reference
-    range; :func:`residual_noise_floor` of the pair (reference, deformed) of one camera),
-    pooled over the cameras as the residual is; the deformed images' texture ratios; and each
-    camera's contrast ratio (reference over deformed, over the region)."""
-    percents, counts, ratios, contrast = [], [], [], []
-    for c in range(2):
-        floor = residual_noise_floor(ref.X, res.mask[c], [ref.images[c], images[c]],
-                                     [ref.cameras[c], ref.cameras[c]])
-        percents.append(floor.percent)
-        counts.append(np.count_nonzero(res.mask[c]))
-        ratios.append(floor.texture_ratio()[1])
-        contrast.append(floor.contrast[0] / floor.contrast[1] if floor.contrast[1] > 0 else 1.0)
-    n = sum(counts)
-    pooled = float(np.sqrt(np.dot(counts, np.square(percents)) / n)) if n else float("nan")
-    return pooled, ratios, contrast
-
-
-def displacement_verdict(residual_percent: float, noise_percent: float, U: np.ndarray,
-                         nodes: np.ndarray, texture_ratios: Sequence[float], sources: Sequence[str],
-                         finest: ScaleReport, settings: DisplacementSettings,
-                         validity: NodeValidity | None = None) -> str | None:
-    """Why a displacement cannot be trusted, or None: no texture in a deformed image, a
-    diverged field (``U``: the Gauss-Newton's change from its start), then :func:`driver.judge`
-    (residual against the noise floor, stagnation), then the local checks (``validity``: more
-    than ``settings.max_invalid_share`` of the nodes invalid, the worst named)."""
-    for ratio, source in zip(texture_ratios, sources):
-        if not ratio >= MIN_TEXTURE_RATIO:
-            return (f"{source}: no texture to correlate over the specimen (contrast over noise "
-                    f"{ratio:.3g}, at least {MIN_TEXTURE_RATIO:g} needed): a uniform or "
-                    "pure-noise image, or the wrong image")
-    size = float(np.linalg.norm(np.ptp(nodes, axis=0)))
-    largest = float(np.max(np.linalg.norm(U, axis=1))) if U.size else 0.0
-    if not np.isfinite(largest) or largest > settings.max_shape_fraction * size:
-        return (f"the displacement diverged: {largest:.3g} mm at a node, more than "
-                f"{settings.max_shape_fraction:g} of the surface's size ({size:.3g} mm)")
-    failure = judge(residual_percent, noise_percent, np.zeros(len(nodes)), nodes, finest, settings)
-    if failure is None and validity is not None:
-        failure = validity.failure(nodes, settings.max_invalid_share)
-    return failure
 
 
 def _decrement(gn: DisplacementGNResult, view: ReferenceView, images: Sequence, solver,
@@ -386,7 +347,7 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                 return dataclasses.replace(again, time_s=time.perf_counter() - t0, iterations=(
                     total_iterations + gn.iterations + again.iterations))
         U, total_iterations = gn.U, total_iterations + gn.iterations
-        noise_percent, ratios, contrast = _noise_floor(view, gn.residual, imgs)
+        noise_percent, ratios, contrast = noise_floor(view, gn.residual, imgs)
         report = ScaleReport(scale=scale, residual_percent=gn.residual.std_percent,
                              noise_percent=noise_percent, fixed_point_iterations=1,
                              shape_converged=gn.converged, fixed_point_converged=True,
@@ -410,10 +371,14 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
                                    reports[-1], settings, validity)
     if failure is not None:
         logger.info("displacement failed: %s", failure)
+    hooks = given.solver if isinstance(given, CachedFactorization) else given   # (the hooks')
+    uncertainty = displacement_uncertainty(U, view, imgs, hooks, settings.normalisation) \
+        if settings.uncertainty and failure is None else None
     return DisplacementMeasurement(U=U, nodes=reference.mesh.nodes, residual=gn.residual,
                                    reference=reference.view(settings.scales[-1]),
                                    history=tuple(log.records), iterations=total_iterations,
                                    time_s=time.perf_counter() - t0,
                                    converged=failure is None and all(r.converged for r in reports),
                                    noise_percent=noise_percent, failure=failure,
-                                   scales=tuple(reports), validity=validity)
+                                   scales=tuple(reports), validity=validity,
+                                   uncertainty=uncertainty)

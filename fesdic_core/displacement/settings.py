@@ -53,6 +53,9 @@ class DisplacementSettings:
         displacement gradients; :mod:`fesdic_core.displacement.driver`).
     max_invalid_share : fail when more than this share of the seen nodes fail their local checks
         (:mod:`fesdic_core.displacement.validity`; default measured in :mod:`~fesdic_core.residual.validity`).
+    uncertainty : estimate each node's standard deviation and bias indicator at the end
+        (:mod:`fesdic_core.displacement.uncertainty`: one residual with its derivative, one noise
+        draw and the step's covariance, for a trusted frame).
     """
 
     scales: tuple[int, ...] = (0,)
@@ -66,6 +69,7 @@ class DisplacementSettings:
     max_shape_fraction: float = 0.25
     jacobian: str = "reference"
     max_invalid_share: float = DISPLACEMENT_MAX_INVALID_SHARE
+    uncertainty: bool = True
 
     def __post_init__(self):
         # the shape's checks of the scales and the normalisation (ValueError naming them)

@@ -126,18 +126,24 @@ def _frames_table(run) -> str:
     for f in run.frames:
         mean = "" if f.U is None else ", ".join(f"{1e3 * v:.2f}" for v in _mean_valid(f))
         valid = "" if f.valid is None else f"{f.n_valid} of {len(f.valid)}"
+        u = f.uncertainty_summary()
+        spread = "" if u is None else " / ".join(
+            ", ".join(f"{1e3 * v:.2f}" for v in u[key]) for key in ("median", "max"))
         status = "ok" if f.ok else f"FAILED: {f.failure}"
         rows.append(f'<tr class="{"" if f.ok else "failed"}"><td>{f.index}</td>'
                     f"<td>{html.escape(f.cam0)}<br>{html.escape(f.cam1)}</td>"
                     f"<td>{f.residual_percent:.3f}</td><td>{f.noise_percent:.3f}</td>"
-                    f"<td>{valid}</td><td>{mean}</td><td>{f.iterations}</td><td>{f.start_frame}</td>"
+                    f"<td>{valid}</td><td>{mean}</td><td>{spread}</td><td>{f.iterations}</td><td>{f.start_frame}</td>"
                     f"<td>{f.time_s:.1f}</td><td class=\"status\">{html.escape(status)}</td></tr>")
     head = ("<tr><th>frame</th><th>images</th><th>residual (%)</th><th>noise floor (%)</th>"
-            "<th>valid nodes</th><th>mean u of the valid nodes (µm)</th><th>iterations</th><th>started from</th><th>time (s)</th>"
+            "<th>valid nodes</th><th>mean u of the valid nodes (µm)</th>"
+            "<th>uncertainty x, y, z: median / max (µm)</th><th>iterations</th><th>started from</th><th>time (s)</th>"
             "<th>status</th></tr>")
     note = ("<p>Statistics count only the nodes valid locally (residual within the local noise, "
             "texture, conditioning, consistent with their neighbours); the others are not "
-            "measured.</p>")
+            "measured. The uncertainty of a component is the root sum of squares of its "
+            "standard deviation under the images' noise and its bias indicator (the change "
+            "with the next finer spline level).</p>")
     return "<table>\n" + head + "\n" + "\n".join(rows) + "\n</table>\n" + note
 
 

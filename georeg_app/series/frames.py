@@ -21,6 +21,7 @@ from fesdic_core.displacement.driver import measure_displacement
 from fesdic_core.displacement.start import (coarse_noise_percent, feature_start,
                                             image_shift_px, start_residual_percent)
 from fesdic_core.displacement.strain import surface_green_lagrange
+from fesdic_core.displacement.uncertainty import DisplacementUncertainty
 from fesdic_core.imaging.image import read_image
 
 from georeg_app.series.reference import SeriesReference
@@ -35,7 +36,10 @@ class FrameResult:
     """One deformed pair's outcome (``U``, ``strain``, ``residual_node``: None if the frame
     raised before any field; ``failure``: None for a trusted field). ``valid`` (n,) bool and
     ``residual_to_noise`` (n,): each node's local checks
-    (:attr:`~fesdic_core.displacement.driver.DisplacementMeasurement.valid`), None with no field."""
+    (:attr:`~fesdic_core.displacement.driver.DisplacementMeasurement.valid`), None with no field.
+    ``uncertainty``: the field's standard deviation and bias indicator per node and component
+    (:class:`~fesdic_core.displacement.uncertainty.DisplacementUncertainty`), None for a failed
+    frame."""
 
     index: int
     cam0: str
@@ -53,6 +57,7 @@ class FrameResult:
     start: str = ""                 # where the starting field came from (:func:`frame_start`)
     valid: np.ndarray | None = None
     residual_to_noise: np.ndarray | None = None
+    uncertainty: DisplacementUncertainty | None = None
 
     @property
     def ok(self) -> bool:
@@ -62,6 +67,15 @@ class FrameResult:
     def n_valid(self) -> int | None:
         """Number of nodes valid locally (None with no field)."""
         return None if self.valid is None else int(np.count_nonzero(self.valid))
+
+    def uncertainty_summary(self) -> dict | None:
+        """``{"median": (3,), "max": (3,)}``: the median and the largest uncertainty of each
+        component (mm) over the valid nodes, or None without one."""
+        u = None if self.uncertainty is None else self.uncertainty.uncertainty_mm
+        if u is None:
+            return None
+        u = u if self.valid is None else u[np.asarray(self.valid, bool)]
+        return {"median": np.median(u, axis=0), "max": np.max(u, axis=0)} if len(u) else None
 
 
 def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
@@ -91,7 +105,8 @@ def measure_frame(reference: SeriesReference, index: int, paths: Sequence[Path],
                        converged=bool(m.converged), failure=m.failure,
                        time_s=time.perf_counter() - t0, start_frame=start_frame, start=start,
                        valid=np.asarray(m.valid, bool),
-                       residual_to_noise=np.asarray(m.residual_to_noise, float))
+                       residual_to_noise=np.asarray(m.residual_to_noise, float),
+                       uncertainty=m.uncertainty)
 
 
 def frame_start(reference: SeriesReference, index: int, images: Sequence,

@@ -8,7 +8,10 @@
   in the local tangent frame, :mod:`fesdic_core.displacement.strain`), ``valid`` (1 for a node
   that passed its local checks, 0 for one the images do not determine or that diverged:
   :mod:`fesdic_core.displacement.validity`) and ``residual_to_noise`` (the residual over the
-  node's support against the local noise floor there). A frame that failed
+  node's support against the local noise floor there); for a trusted frame measured by a
+  solver that gives its step's covariance, ``displacement_uncertainty_mm`` (3) with its parts
+  ``displacement_std_mm`` (the image noise) and ``displacement_bias_mm`` (the bias
+  indicator), per component (:mod:`fesdic_core.displacement.uncertainty`). A frame that failed
   its checks is written as ``frame_NNNN_<image>_failed.vtu`` (its untrusted field) and left
   out of the time series. The outputs are written even when every frame failed (there is
   then something to inspect; the command still exits with status 1).
@@ -72,11 +75,13 @@ def track_summary(run) -> dict:
     "failed_frames": [index], "frames": [{"index", "cam0", "cam1", "residual_percent",
     "iterations", "converged", "time_s", "mesh_file", "status", "failure", "noise_percent",
     "start_frame", "start", "mean_displacement_mm", "max_displacement_mm", "n_valid",
-    "valid_share"}]}``; ``status`` is "ok" or "failed" (``failure`` says why); ``start_frame``:
+    "valid_share", "displacement_uncertainty_mm"}]}``; ``status`` is "ok" or "failed" (``failure`` says why); ``start_frame``:
     the frame whose field started this one (0: from rest); ``start``: where the starting
     field came from (``[displacement] start``: features, the previous field, zero); ``n_valid``: the nodes valid
     locally (of ``n_nodes``), ``valid_share`` their share (None with no field); the mean and
-    largest displacements are those of the valid nodes."""
+    largest displacements are those of the valid nodes; ``displacement_uncertainty_mm``: the
+    median and the largest uncertainty of each component over the valid nodes (None without
+    one)."""
     frames = []
     for f in run.frames:
         U = valid_field(f)
@@ -91,6 +96,7 @@ def track_summary(run) -> dict:
             "max_displacement_mm": None if U is None else float(np.max(np.linalg.norm(U, axis=1))),
             "n_valid": f.n_valid,
             "valid_share": None if f.valid is None else _finite(np.mean(f.valid)),
+            "displacement_uncertainty_mm": f.uncertainty_summary(),
         })
     d = run.config.displacement
     chosen = getattr(run, "levels", None)
@@ -124,7 +130,7 @@ def write_frame_vtu(path: str | os.PathLike, mesh, frame, element_face=None) -> 
         "displacement_mm": np.asarray(frame.U, float),
         "residual": np.asarray(frame.residual_node, float),
         "strain_xx": frame.strain[:, 0], "strain_yy": frame.strain[:, 1],
-        "strain_xy": frame.strain[:, 2], **_validity_data(frame)},
+        "strain_xy": frame.strain[:, 2], **_validity_data(frame), **_uncertainty_data(frame)},
         cell_data=None if element_face is None else {"face": np.asarray(element_face, np.int32)})
 
 
@@ -134,6 +140,18 @@ def _validity_data(frame) -> dict:
         return {}
     return {"valid": np.asarray(frame.valid, np.uint8),
             "residual_to_noise": np.asarray(frame.residual_to_noise, float)}
+
+
+def _uncertainty_data(frame) -> dict:
+    """The point data of a frame's uncertainty and its parts (those it has)."""
+    u = frame.uncertainty
+    if u is None or u.std_mm is None:
+        return {}
+    data = {"displacement_uncertainty_mm": np.asarray(u.uncertainty_mm, float),
+            "displacement_std_mm": np.asarray(u.std_mm, float)}
+    if u.bias_mm is not None:
+        data["displacement_bias_mm"] = np.asarray(u.bias_mm, float)
+    return data
 
 
 def write_track(out_dir: str | os.PathLike, run, overwrite: bool = False) -> list[Path]:

@@ -143,6 +143,9 @@ def _part_model(nominal: Path, vtu: Path, mesh: SurfaceMesh) -> NominalModel:
                         face_names=tuple(names))
 
 
+#: image scales a displacement solver's schedule covers (0: full resolution)
+MAX_SCALES = 16
+
 #: the displacement's levels of a series' first measurement when they are chosen from the data
 START_LEVELS = 2
 
@@ -151,7 +154,12 @@ def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | No
                         tikhonov_length_mm: float = 10.0, levels: int = 2):
     """The step solver of a displacement method on the node-major dofs: None (plain FE),
     Tikhonov on each component, or the spline levels of ``model`` on each component
-    (``kron(C_s, I3)``, image scale s -> level min(s, levels - 1))."""
+    (``kron(C_s, I3)``, image scale s -> level min(s, levels - 1)).
+
+    The georeg solver holds one level finer than it solves with where the mesh reproduces it:
+    its bias indicator (the step of the next finer level, for the displacement's uncertainty)
+    is then that level's, not the unregularized FE step's (which carries the noise of every
+    FE dof)."""
     if method == "fe":
         return None
     if method == "tikhonov":
@@ -160,7 +168,11 @@ def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | No
         raise ValueError(f"unknown displacement method {method!r}")
     if model is None:
         raise InputError("[displacement] method = \"georeg\" needs the spline of the reference")
-    return GeometricRegularization(displacement_space(model, levels))
+    try:
+        finer = displacement_space(model, levels + 1)
+    except ValueError:                          # the mesh does not reproduce a finer level
+        return GeometricRegularization(displacement_space(model, levels))
+    return GeometricRegularization(finer, {s: min(s, levels - 1) + 1 for s in range(MAX_SCALES)})
 
 
 def check_frames(config: TrackConfig, size: tuple[int, int]) -> None:

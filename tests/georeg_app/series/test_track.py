@@ -73,6 +73,18 @@ def test_track_measures_the_series_and_marks_the_failed_frame(series, tmp_path, 
         rms = np.sqrt(np.mean((data["displacement_mm"] - motion(mesh.nodes)) ** 2, axis=0))
         assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{frame['mesh_file']}: {1e3 * rms} um"
         assert {"residual", "strain_xx", "strain_yy", "strain_xy"} <= set(data)
+        # plain FE: the uncertainty is the noise's std (its bias part only the last step's
+        # remainder); summary.json gives its median and largest value over the valid nodes,
+        # and two of them cover the error
+        u = data["displacement_uncertainty_mm"]
+        assert np.all(u >= data["displacement_std_mm"])
+        np.testing.assert_allclose(u, data["displacement_std_mm"], rtol=0.05)
+        valid = data["valid"].astype(bool)
+        spread = frame["displacement_uncertainty_mm"]
+        np.testing.assert_allclose(spread["median"], np.median(u[valid], axis=0), rtol=1e-12)
+        np.testing.assert_allclose(spread["max"], np.max(u[valid], axis=0), rtol=1e-12)
+        covered = np.mean(np.abs(data["displacement_mm"] - motion(mesh.nodes)) <= 2 * u)
+        assert covered >= 0.85, f"{frame['mesh_file']}: {covered:.3f} within 2 uncertainties"
     stretch = _point_data(out / "frame_0004_f4_cam0.vtu")
     assert abs(np.mean(stretch["strain_xx"]) - (0.005 + 0.5 * 0.005 ** 2)) < 1e-4
     report = (out / "report.html").read_text()
@@ -154,6 +166,11 @@ def _track_first_frame(folder, extra: str, out) -> tuple[dict, meshio.Mesh]:
     truth = MOTIONS[0](vtu.points)
     rms = np.sqrt(np.mean((vtu.point_data["displacement_mm"] - truth) ** 2, axis=0))
     assert np.all(rms[:2] < 1.5e-3) and rms[2] < 6e-3, f"{1e3 * rms} um"
+    # the uncertainty of each component: its std and bias parts, root sum of squares
+    data = vtu.point_data
+    np.testing.assert_allclose(data["displacement_uncertainty_mm"] ** 2,
+                               data["displacement_std_mm"] ** 2 + data["displacement_bias_mm"] ** 2)
+    assert frame["displacement_uncertainty_mm"]["max"] is not None
     return summary, vtu
 
 

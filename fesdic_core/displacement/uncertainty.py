@@ -1,0 +1,162 @@
+"""How sure a measured displacement is: the image noise through the Gauss-Newton step, and
+the bias indicator of its regularization (the displacement's counterpart of
+:mod:`fesdic_core.shape.uncertainty`).
+
+At the converged field ``U`` of the finest scale, ``H`` and ``b`` are those of the full
+Gauss-Newton (the deformed images' derivative at ``U``; Eq. 8 with three components per
+node, :mod:`fesdic_core.displacement.residual`). Noise in the images moves ``b`` by ``b_n``
+and the field by ``G b_n``, ``G`` the step solver's linear map (FE: ``H^-1``; a spline level
+per component: ``kron(C_s, I3)^T (kron(C_s, I3) H kron(C_s, I3)^T)^-1 kron(C_s, I3)``,
+Eq. 21). With the noise model of the shape
+
+    Cov(b) = kappa H                                                     (noise model)
+
+the covariance of the field is ``kappa G H G^T`` and each component's standard deviation
+``sqrt(kappa diag(G H G^T))`` (:class:`~fesdic_core.solve.solvers.StepCovarianceHook`).
+
+``kappa`` is measured on the frame itself: the residual that the richest model (the FE mesh,
+a linearised step from ``U``) leaves, ``chi2 - b^T H^-1 b``, is the noise's share of the
+cost; a draw of white noise added to the deformed images and passed through the same image
+model, interpolation and per-element normalisation gives the ratio of ``b_n^T H^-1 b_n / n``
+(``kappa`` of that draw, ``n`` the dofs a point sees) to the draw's own cost. Their product
+is ``kappa``: the draw's amplitude cancels, only the correlation of the points' noise (the
+interpolation's) is taken from it. The reference images' noise enters the residual as the
+deformed ones' does (the same interpolation at nearly the same sub-pixel positions), so it
+is in the residual's share and needs no draw of its own.
+
+The bias indicator is the solver's :class:`~fesdic_core.solve.solvers.BiasStepHook`: the
+change of the field with the regularization one notch weaker (the next finer spline level;
+FE: none). The uncertainty of each component is ``sqrt(std^2 + bias^2)``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+
+from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
+                                               displacement_operators, displacement_residual)
+from fesdic_core.solve.solvers import BiasStepHook, StepCovarianceHook, seen_dofs
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["DisplacementUncertainty", "displacement_noise_variance", "displacement_uncertainty"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class DisplacementUncertainty:
+    """Per node and component (world frame, mm) how far the field may be off.
+
+    std_mm : (n, 3) the noise's standard deviation, or None (a solver with no covariance)
+    bias_mm : (n, 3) the bias indicator's magnitude, or None (a solver without one)
+    variance : (3,) ``kappa`` of ``Cov(b) = kappa H`` per component, in the solver's step
+    residual_ratio : the FE-unexplained residual over the draw's (the noise's amplitude
+        relative to the draw's)
+    """
+
+    std_mm: np.ndarray | None
+    bias_mm: np.ndarray | None
+    variance: np.ndarray
+    residual_ratio: float = float("nan")
+
+    @property
+    def uncertainty_mm(self) -> np.ndarray | None:
+        """(n, 3) ``sqrt(std^2 + bias^2)`` per component (std alone without a bias), or None."""
+        if self.std_mm is None:
+            return None
+        bias = 0.0 if self.bias_mm is None else self.bias_mm
+        return np.sqrt(np.square(self.std_mm) + np.square(bias))
+
+
+#: the noise draw's standard deviation, in fractions of each image's dynamic range (it cancels
+#: from ``kappa``; it only has to stay well inside the range)
+DRAW_FRACTION = 0.01
+
+#: noise draws behind ``kappa`` (each: one residual and one step)
+DRAWS = 4
+
+
+def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: np.ndarray,
+                                U: np.ndarray, view: ReferenceView, images: Sequence,
+                                normalisation: str, step, diag: np.ndarray, draws: int = DRAWS,
+                                seed: int = 0) -> tuple[np.ndarray, float]:
+    """``kappa`` of each component and the residual ratio (module docstring).
+
+    Parameters
+    ----------
+    res : the residual at ``U`` with its derivative (``dr_du``).
+    H, b : (3n, 3n), (3n,) the full Gauss-Newton's operators of ``res``.
+    U : (n, 3) the converged field; ``view``, ``images``: its scale's reference and images.
+    step : ``b -> G b``, the solver's step map at this state.
+    diag : (3n,) ``diag(G H G^T)``.
+
+    Returns
+    -------
+    kappa : (3,) per component, ``sum_k (G b_n)^2 / sum_k diag(G H G^T)`` over the draws and
+        the dofs of component ``k``, scaled by the ratio: the noise's variance in the
+        solver's own step (a coarse level averages many points, whose noise the
+        interpolation correlates).
+    ratio : the FE-unexplained residual over the draws' mean FE-unexplained cost.
+    """
+    seen = seen_dofs(H)
+    if not seen.any():
+        return np.full(3, np.nan), float("nan")
+    lu = spla.splu(sps.csc_matrix(H[seen][:, seen]))
+    cost = chi_square(res, view.quad)[0]
+    unexplained = cost - float(b[seen] @ lu.solve(b[seen]))          # the FE model's residual
+    rng = np.random.default_rng(seed)
+    squares, costs = np.zeros(3), []
+    for _ in range(int(draws)):
+        noisy = [im.with_values(im.values + rng.normal(0.0, DRAW_FRACTION * im.dynamic_range,
+                                                       im.shape)) for im in images]
+        drawn = displacement_residual(U, view, noisy, normalisation, False)
+        both = res.mask & drawn.mask
+        simulated = dataclasses.replace(res, r=np.where(both, drawn.r - res.r, 0.0), mask=both)
+        _, b_n = displacement_operators(view.quad, simulated)          # b of the draw alone
+        squares += np.sum(np.square(step(b_n)).reshape(-1, 3), axis=0)
+        # the draw's cost that the FE model leaves, as the frame's (RSS / (N - p), not / N)
+        costs.append(chi_square(simulated, view.quad)[0] - float(b_n[seen] @ lu.solve(b_n[seen])))
+    ratio = max(unexplained, 0.0) / float(np.mean(costs)) if np.mean(costs) > 0 else float("nan")
+    per_unit = np.sum(np.nan_to_num(diag).reshape(-1, 3), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        kappa = squares / int(draws) / per_unit * ratio
+    return kappa, ratio
+
+
+def displacement_uncertainty(U: np.ndarray, view: ReferenceView, images: Sequence, solver,
+                             normalisation: str = "element") -> DisplacementUncertainty:
+    """The standard deviation and bias indicator of the converged field ``U`` (n, 3).
+
+    Parameters
+    ----------
+    U : (n, 3) the field at the end of the finest scale.
+    view : the finest scale's :class:`ReferenceView`; ``images``: the deformed pair at it.
+    solver : the step solver of the measurement (``StepCovarianceHook`` for the std,
+        ``BiasStepHook`` for the bias; without them the parts are None).
+    normalisation : the residual's (Remark 2).
+    """
+    U = np.asarray(U, float).reshape(-1, 3)
+    q = U.reshape(-1)
+    res = displacement_residual(U, view, images, normalisation, True)
+    H, b = displacement_operators(view.quad, res)
+    H = sps.csr_matrix(H)
+    if not isinstance(solver, StepCovarianceHook):
+        logger.info("%r gives no step covariance: no displacement uncertainty", solver)
+        return DisplacementUncertainty(std_mm=None, bias_mm=None, variance=np.full(3, np.nan))
+    diag, _ = solver.step_covariance(H, view.scale)
+    zero = np.zeros_like(q)
+    kappa, ratio = displacement_noise_variance(res, H, b, U, view, images, normalisation,
+                                               lambda b_n: solver.solve(H, b_n, zero, view.scale),
+                                               diag)
+    std = np.sqrt(np.clip(kappa * np.nan_to_num(diag).reshape(-1, 3), 0.0, None))
+    bias = None
+    if isinstance(solver, BiasStepHook):       # the weaker step's change to the solver's own
+        bias = np.abs(solver.bias_step(H, b, q, view.scale)
+                      - solver.solve(H, b, q, view.scale)).reshape(-1, 3)
+    logger.info("displacement uncertainty: std median %.3g um, max %.3g um (kappa %s)",
+                1e3 * np.median(std), 1e3 * np.max(std), np.array2string(kappa, precision=3))
+    return DisplacementUncertainty(std_mm=std, bias_mm=bias, variance=kappa, residual_ratio=ratio)
