@@ -40,7 +40,7 @@ import scipy.sparse.linalg as spla
 
 from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
                                                displacement_operators, displacement_residual)
-from fesdic_core.solve.solvers import BiasStepHook, StepCovarianceHook, seen_dofs
+from fesdic_core.solve.solvers import BiasStepHook, StepCovarianceHook, StepSolver, seen_dofs
 
 logger = logging.getLogger(__name__)
 
@@ -127,8 +127,8 @@ def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: n
     return kappa, ratio
 
 
-def displacement_uncertainty(U: np.ndarray, view: ReferenceView, images: Sequence, solver,
-                             normalisation: str = "element") -> DisplacementUncertainty:
+def displacement_uncertainty(U: np.ndarray, view: ReferenceView, images: Sequence,
+                             solver: StepSolver, normalisation: str = "element") -> DisplacementUncertainty:
     """The standard deviation and bias indicator of the converged field ``U`` (n, 3).
 
     Parameters
