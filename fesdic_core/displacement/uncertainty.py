@@ -39,7 +39,8 @@ import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
 from fesdic_core.displacement.residual import (DisplacementResidual, ReferenceView, chi_square,
-                                               displacement_operators, displacement_residual)
+                                               displacement_operators, displacement_residual,
+                                               displacement_rhs)
 from fesdic_core.solve.solvers import BiasStepHook, StepCovarianceHook, StepSolver, seen_dofs
 
 logger = logging.getLogger(__name__)
@@ -109,6 +110,7 @@ def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: n
     cost = chi_square(res, view.quad)[0]
     unexplained = cost - float(b[seen] @ lu.solve(b[seen]))          # the FE model's residual
     rng = np.random.default_rng(seed)
+    wG = np.where(res.mask, view.quad.weight_mm2, 0.0)[:, :, None] * res.dr_du   # w dr/du
     squares, costs = np.zeros(3), []
     for _ in range(int(draws)):
         noisy = [im.with_values(im.values + rng.normal(0.0, DRAW_FRACTION * im.dynamic_range,
@@ -116,7 +118,7 @@ def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: n
         drawn = displacement_residual(U, view, noisy, normalisation, False)
         both = res.mask & drawn.mask
         simulated = dataclasses.replace(res, r=np.where(both, drawn.r - res.r, 0.0), mask=both)
-        _, b_n = displacement_operators(view.quad, simulated)          # b of the draw alone
+        b_n = displacement_rhs(view.quad, wG, simulated.r)             # b of the draw alone
         squares += np.sum(np.square(step(b_n)).reshape(-1, 3), axis=0)
         # the draw's cost that the FE model leaves, as the frame's (RSS / (N - p), not / N)
         costs.append(chi_square(simulated, view.quad)[0] - float(b_n[seen] @ lu.solve(b_n[seen])))
@@ -149,14 +151,15 @@ def displacement_uncertainty(U: np.ndarray, view: ReferenceView, images: Sequenc
         return DisplacementUncertainty(std_mm=None, bias_mm=None, variance=np.full(3, np.nan))
     diag, _ = solver.step_covariance(H, view.scale)
     zero = np.zeros_like(q)
+    factorize = getattr(solver, "factorize", None)           # (a step map factorized once)
+    step = factorize(H, view.scale) if callable(factorize) else \
+        (lambda b_n, q_n: solver.solve(H, b_n, q_n, view.scale))
     kappa, ratio = displacement_noise_variance(res, H, b, U, view, images, normalisation,
-                                               lambda b_n: solver.solve(H, b_n, zero, view.scale),
-                                               diag)
+                                               lambda b_n: step(b_n, zero), diag)
     std = np.sqrt(np.clip(kappa * np.nan_to_num(diag).reshape(-1, 3), 0.0, None))
     bias = None
     if isinstance(solver, BiasStepHook):       # the weaker step's change to the solver's own
-        bias = np.abs(solver.bias_step(H, b, q, view.scale)
-                      - solver.solve(H, b, q, view.scale)).reshape(-1, 3)
+        bias = np.abs(solver.bias_step(H, b, q, view.scale) - step(b, q)).reshape(-1, 3)
     logger.info("displacement uncertainty: std median %.3g um, max %.3g um (kappa %s)",
                 1e3 * np.median(std), 1e3 * np.max(std), np.array2string(kappa, precision=3))
     return DisplacementUncertainty(std_mm=std, bias_mm=bias, variance=kappa, residual_ratio=ratio)
