@@ -125,7 +125,9 @@ def choose_displacement_levels(model: NominalModel, reference: DisplacementRefer
     top = max_displacement_levels(model)
     start_levels = min(int(start_levels), top)
     recorder = _LastSystem(GeometricRegularization(displacement_space(model, start_levels)))
-    m = measure_displacement(reference, images, recorder, U0)
+    quick = dataclasses.replace(reference, settings=dataclasses.replace(reference.settings,
+                                                                         uncertainty=False))
+    m = measure_displacement(quick, images, recorder, U0)             # (its system, not its std)
     finest = reference.settings.scales[-1]
     if not m.ok or finest not in recorder.systems or top == 1:
         logger.info("displacement levels: kept %d (%s)", start_levels,

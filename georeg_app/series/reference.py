@@ -196,7 +196,8 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
     settings = DisplacementSettings(scales=d.scale_sequence,
                                     normalisation=config.method.normalisation,
                                     jacobian=d.jacobian,
-                                    max_invalid_share=d.max_invalid_share)
+                                    max_invalid_share=d.max_invalid_share,
+                                    uncertainty=d.uncertainty)
     if d.prefilter_px != config.method.prefilter_px:     # the frames' image model
         images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)

@@ -339,7 +339,10 @@ def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, 
     run's fields to round-off (the same frames, statuses and chain)."""
     pytest.importorskip("distributed")
     folder, _ = series
-    config = _config(folder, displacement=f'method = "fe"\nscales = 3\nincremental = {incremental}')
+    # (the independent frames without their uncertainty: the setting, and a faster test)
+    unc = "true" if incremental == "true" else "false"
+    config = _config(folder, displacement=f'method = "fe"\nscales = 3\nincremental = {incremental}'
+                     f'\nuncertainty = {unc}')
     runs = {}
     for scheduler in ("serial", "processes"):
         out = tmp_path / scheduler
@@ -355,6 +358,8 @@ def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, 
             ua = _point_data(serial_out / a["mesh_file"])["displacement_mm"]
             ub = _point_data(dask_out / b["mesh_file"])["displacement_mm"]
             np.testing.assert_allclose(ua, ub, rtol=0, atol=1e-12)
+            has = "displacement_uncertainty_mm" in _point_data(dask_out / b["mesh_file"])
+            assert has == (a["status"] == "ok" and unc == "true")
 
 
 def test_a_georeg_measure_folder_is_a_reference(series, tmp_path):
