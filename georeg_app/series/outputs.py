@@ -10,8 +10,8 @@
   :mod:`fesdic_core.displacement.validity`) and ``residual_to_noise`` (the residual over the
   node's support against the local noise floor there); for a trusted frame measured by a
   solver that gives its step's covariance, ``displacement_uncertainty_mm`` (3) with its parts
-  ``displacement_std_mm`` (the image noise) and ``displacement_bias_mm`` (the bias
-  indicator), per component (:mod:`fesdic_core.displacement.uncertainty`). A frame that failed
+  ``displacement_std_mm`` (the image noise) and ``displacement_bias_mm`` (the estimated
+  bias: the change with the next finer level less its noise), per component (:mod:`fesdic_core.displacement.uncertainty`). A frame that failed
   its checks is written as ``frame_NNNN_<image>_failed.vtu`` (its untrusted field) and left
   out of the time series. The outputs are written even when every frame failed (there is
   then something to inspect; the command still exits with status 1).
@@ -149,8 +149,8 @@ def _uncertainty_data(frame) -> dict:
         return {}
     data = {"displacement_uncertainty_mm": np.asarray(u.uncertainty_mm, float),
             "displacement_std_mm": np.asarray(u.std_mm, float)}
-    if u.bias_mm is not None:
-        data["displacement_bias_mm"] = np.asarray(u.bias_mm, float)
+    if u.bias_mm is not None:             # the estimated bias: the indicator less its noise
+        data["displacement_bias_mm"] = np.sqrt(np.asarray(u.squared_bias_mm2, float))
     return data
 
 

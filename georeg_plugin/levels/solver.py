@@ -307,13 +307,19 @@ class GeometricRegularization:
         diag = np.asarray(CT.multiply(CT_M).sum(axis=1)).ravel()                # rows of C^T M C
         return diag, lambda V: CT_M @ (C @ np.asarray(V, dtype=float))
 
+    def weaker(self, scale: int) -> "GeometricRegularization | None":
+        """The regularization one notch weaker at ``scale``: the next finer spline level
+        (whose step is :meth:`bias_step`), or None at the finest level (the unregularized
+        step, the caller's)."""
+        s = self.level(scale)
+        return dataclasses.replace(self, schedule={scale: s - 1}) if s > 0 else None
+
     def bias_step(self, H, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         """The bias indicator: the step of the next finer spline level from the current state,
         ``C_{s-1}^T (C_{s-1} H C_{s-1}^T)^-1 C_{s-1} b`` (Eqs. 18-21), (n_fe,). At the finest
         level (``s = 0``) it is the unregularized step ``H^-1 b`` over the dofs a point sees."""
-        s = self.level(scale)
-        if s > 0:
-            finer = dataclasses.replace(self, schedule={scale: s - 1})
+        finer = self.weaker(scale)
+        if finer is not None:
             return finer.solve(H, b, q, scale)
         H = sps.csr_matrix(H)
         seen = _seen_dofs(H)
