@@ -247,3 +247,26 @@ def test_factorize_gives_the_step_of_solve_for_every_right_hand_side(two_levels)
                             atol=1e-14 * np.abs(b).max())
     with pytest.raises(ValueError, match="does not match"):
         reg.factorize(H, 0)(np.ones(5), np.zeros(5))
+
+
+def test_weaker_is_the_next_finer_level_and_its_change_has_the_covariance_difference(two_levels):
+    """``weaker(scale)``: the next finer level (None at the finest); its step is the bias
+    step; for nested levels the change ``(G' - G) b`` under ``Cov(b) = H`` has the covariance
+    ``G' H G' - G H G`` (the cross terms are ``G``: ``G H G' = G``), checked densely."""
+    space, rng = two_levels
+    reg = GeometricRegularization(space)
+    assert reg.weaker(0) is None and reg.weaker(1).level(1) == 0
+    H = _random_spd(space.n_fe, rng)
+    b = rng.standard_normal(space.n_fe)
+    q = np.zeros(space.n_fe)
+    assert_allclose(reg.weaker(1).solve(H, b, q, 1), reg.bias_step(H, b, q, 1), atol=1e-12)
+    Hd = H.toarray()
+    G = {s: space.operators[s].toarray().T @ np.linalg.solve(
+        space.operators[s].toarray() @ Hd @ space.operators[s].toarray().T,
+        space.operators[s].toarray()) for s in (0, 1)}
+    D = G[0] - G[1]
+    assert_allclose(G[1] @ Hd @ G[0], G[1], atol=1e-10)
+    assert_allclose(D @ Hd @ D.T, G[0] @ Hd @ G[0] - G[1] @ Hd @ G[1], atol=1e-10)
+    diag_f, _ = reg.weaker(1).step_covariance(H, 1)
+    diag_s, _ = reg.step_covariance(H, 1)
+    assert_allclose(diag_f - diag_s, np.diag(D @ Hd @ D.T), atol=1e-10)
