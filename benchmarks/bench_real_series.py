@@ -303,7 +303,7 @@ def main(argv=None) -> int:
                       f"{', '.join(f'{a:.3g}' for a in chosen['agreement'])} std)")
             print(f"{'frame':13s} {'status':7s} {'residual/noise %':>17s} {'valid':>6s} "
                   f"{'median U x, y, z (um)':>24s} {'e1, e2 (%)':>14s} {'time (s)':>8s} "
-                  f"{'DICe z (um)':>11s}")
+                  f"{'DICe z (um)':>11s} {'median uncertainty x, y, z (um)':>32s}")
             for name, f in zip(args.frames, run["summary"].get("frames", [])):
                 row = f"{name:13s} {f['status']:7s}"
                 if not f.get("mesh_file"):
@@ -318,10 +318,16 @@ def main(argv=None) -> int:
                 print(f"{row} {f['residual_percent']:8.3f}/{f['noise_percent']:<8.3f} "
                       f"{f.get('valid_share') or float('nan'):6.3f} "
                       f"{U[0]:8.1f}{U[1]:8.1f}{U[2]:8.1f} {100 * e1:6.2f}{100 * e2:7.2f} "
-                      f"{f['time_s']:8.1f} {gold}")
+                      f"{f['time_s']:8.1f} {gold:>11s} {_spread(f)}")
                 if f["status"] != "ok":
                     print(f"{'':13s} {f.get('failure', '')[:110]}")
     return 0
+
+
+def _spread(frame: dict) -> str:
+    """The median uncertainty of each component over the valid nodes (um), or ''."""
+    u = frame.get("displacement_uncertainty_mm")
+    return "" if not u else " ".join(f"{1e3 * v:8.2f}" for v in u["median"])
 
 
 if __name__ == "__main__":
