@@ -79,7 +79,7 @@ def specimen_config(data: Path, calibration: str = "vic3d") -> str:
 
 
 def track(data: Path, frames, method: str, folder: Path, calibration: str = "vic3d",
-          reference: Path | None = None) -> dict:
+          reference: Path | None = None, uncertainty: bool = True) -> dict:
     spec = specimen_config(data, calibration)
     if reference is not None:      # a `georeg measure` folder: its cameras, surface, method
         images = spec[spec.index("[images]"):spec.index("[cameras]")]
@@ -88,7 +88,8 @@ def track(data: Path, frames, method: str, folder: Path, calibration: str = "vic
     cam1 = ", ".join(f'"{_image(data, f, 1).as_posix()}"' for f in frames)
     config = folder / f"track_{method}.toml"
     config.write_text(spec + f'\n[series]\ncam0 = [{cam0}]\ncam1 = [{cam1}]\n\n'
-                      f'[displacement]\nmethod = "{method}"\nincremental = false\n')
+                      f'[displacement]\nmethod = "{method}"\nincremental = false\n'
+                      f'uncertainty = {str(uncertainty).lower()}\n')
     out = folder / f"out_{method}"
     t0 = time.perf_counter()
     code = cli.main(["-q", "track", str(config), "--out", str(out), "--overwrite"])
@@ -279,6 +280,8 @@ def main(argv=None) -> int:
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     parser.add_argument("--methods", nargs="+", default=["fe", "tikhonov", "georeg"])
     parser.add_argument("--frames", nargs="+", default=list(FRAMES))
+    parser.add_argument("--no-uncertainty", action="store_true",
+                        help="frames without their displacement uncertainty (its cost)")
     parser.add_argument("--peers", action="store_true",
                         help="pyvale and ours with the DICe calibration, instead of the table")
     args = parser.parse_args(argv)
@@ -293,7 +296,8 @@ def main(argv=None) -> int:
     dice = dice_medians(args.data)
     with tempfile.TemporaryDirectory() as tmp:
         for method in args.methods:
-            run = track(args.data, args.frames, method, Path(tmp))
+            run = track(args.data, args.frames, method, Path(tmp),
+                        uncertainty=not args.no_uncertainty)
             print(f"\n## {method}: exit {run['code']}, {run['time_s']:.0f} s in all (reference "
                   "shape included)", flush=True)
             chosen = run["summary"].get("displacement", {}).get("levels_chosen")

@@ -98,7 +98,7 @@ class DisplacementUncertainty:
 DRAW_FRACTION = 0.01
 
 #: noise draws behind ``kappa`` (each: one residual and one step)
-DRAWS = 4
+DRAWS = 2
 
 
 def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: np.ndarray,
