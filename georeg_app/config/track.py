@@ -50,8 +50,10 @@ A complete example (optional keys show their default in parentheses)::
                                   # images converged frames reach 3-7 %; 0.03 catches the
                                   # local divergences of renders)            (default 1.0)
     uncertainty = true            # each node's displacement_uncertainty_mm (std and bias
-                                  # indicator) for fe and georeg: about 1.4 s more per frame
-                                  # of 1600 nodes for fe, 0.4 s for georeg     (default true)
+                                  # indicator) for fe and georeg: 0.4 s more per georeg
+                                  # frame of 320 x 240 px, 4-6 s on GT4's 1920 x 1200
+                                  # (fe: 1.4 s at 320 x 240, the diagonal of H^-1)
+                                  #                                            (default true)
 
     [reference]                   # optional: reuse a `georeg measure` output folder
     dir = "shape_out"             # (its summary.json, <method>.vtu, <method>_cameras.json,
