@@ -150,7 +150,8 @@ def displacement_noise_variance(res: DisplacementResidual, H: sps.spmatrix, b: n
 
 
 def displacement_uncertainty(U: np.ndarray, view: ReferenceView, images: Sequence,
-                             solver: StepSolver, normalisation: str = "element") -> DisplacementUncertainty:
+                             solver: StepSolver,
+                             normalisation: str = "element") -> DisplacementUncertainty:
     """The standard deviation and bias indicator of the converged field ``U`` (n, 3).
 
     Parameters

@@ -11,7 +11,8 @@
   node's support against the local noise floor there); for a trusted frame measured by a
   solver that gives its step's covariance, ``displacement_uncertainty_mm`` (3) with its parts
   ``displacement_std_mm`` (the image noise) and ``displacement_bias_mm`` (the estimated
-  bias: the change with the next finer level less its noise), per component (:mod:`fesdic_core.displacement.uncertainty`). A frame that failed
+  bias: the change with the next finer level less its noise), per component
+  (:mod:`fesdic_core.displacement.uncertainty`). A frame that failed
   its checks is written as ``frame_NNNN_<image>_failed.vtu`` (its untrusted field) and left
   out of the time series. The outputs are written even when every frame failed (there is
   then something to inspect; the command still exits with status 1).
@@ -75,7 +76,8 @@ def track_summary(run) -> dict:
     "failed_frames": [index], "frames": [{"index", "cam0", "cam1", "residual_percent",
     "iterations", "converged", "time_s", "mesh_file", "status", "failure", "noise_percent",
     "start_frame", "start", "mean_displacement_mm", "max_displacement_mm", "n_valid",
-    "valid_share", "displacement_uncertainty_mm"}]}``; ``status`` is "ok" or "failed" (``failure`` says why); ``start_frame``:
+    "valid_share", "displacement_uncertainty_mm"}]}``; ``status`` is "ok" or "failed"
+    (``failure`` says why); ``start_frame``:
     the frame whose field started this one (0: from rest); ``start``: where the starting
     field came from (``[displacement] start``: features, the previous field, zero); ``n_valid``: the nodes valid
     locally (of ``n_nodes``), ``valid_share`` their share (None with no field); the mean and
