@@ -14,15 +14,18 @@ Eq. 21). With the noise model of the shape
 the covariance of the field is ``kappa G H G^T`` and each component's standard deviation
 ``sqrt(kappa diag(G H G^T))`` (:class:`~fesdic_core.solve.solvers.StepCovarianceHook`).
 
-``kappa`` is measured on the frame itself: the residual that the richest model (the FE mesh,
-a linearised step from ``U``) leaves, ``chi2 - b^T H^-1 b``, is the noise's share of the
-cost; a draw of white noise added to the deformed images and passed through the same image
-model, interpolation and per-element normalisation gives the ratio of ``b_n^T H^-1 b_n / n``
-(``kappa`` of that draw, ``n`` the dofs a point sees) to the draw's own cost. Their product
-is ``kappa``: the draw's amplitude cancels, only the correlation of the points' noise (the
-interpolation's) is taken from it. The reference images' noise enters the residual as the
-deformed ones' does (the same interpolation at nearly the same sub-pixel positions), so it
-is in the residual's share and needs no draw of its own.
+``kappa`` is measured on the frame itself, per component ``k``: the residual that the
+richest model (the FE mesh, a linearised step from ``U``) leaves, ``chi2 - b^T H^-1 b``, is
+the noise's share of the cost. Draws of white noise added to the deformed images and passed
+through the same image model, interpolation and per-element normalisation give the
+solver's own step of the noise, ``G b_n``, and the cost the FE model leaves of each draw;
+``kappa_k = sum_k (G b_n)^2 / sum_k diag(G H G^T)`` scaled by the frame's unexplained cost
+over the draws'. The draws' amplitude cancels: only the correlation of the points' noise
+(the interpolation's, which a coarse level's averaging feels) is taken from them, and the
+degrees of freedom the fit absorbs are counted alike in both costs (without that the std
+was 13-31 % low on the tests' renders). The reference images' noise enters the residual as
+the deformed ones' does (the same interpolation at nearly the same sub-pixel positions), so
+it is in the frame's cost and needs no draw of its own.
 
 The bias indicator is the solver's :class:`~fesdic_core.solve.solvers.BiasStepHook`: the
 change ``Delta = (G' - G) b`` of the field with the regularization one notch weaker (``G'``:
