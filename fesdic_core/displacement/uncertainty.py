@@ -22,10 +22,10 @@ solver's own step of the noise, ``G b_n``, and the cost the FE model leaves of e
 ``kappa_k = sum_k (G b_n)^2 / sum_k diag(G H G^T)`` scaled by the frame's unexplained cost
 over the draws'. The draws' amplitude cancels: only the correlation of the points' noise
 (the interpolation's, which a coarse level's averaging feels) is taken from them, and the
-degrees of freedom the fit absorbs are counted alike in both costs (without that the std
-was 13-31 % low on the tests' renders). The reference images' noise enters the residual as
-the deformed ones' does (the same interpolation at nearly the same sub-pixel positions), so
-it is in the frame's cost and needs no draw of its own.
+degrees of freedom the fit absorbs are counted alike in both costs (without that, the
+fields spread 1.22-1.31 times the std on the tests' renders). The reference images' noise
+enters the residual as the deformed ones' does (the same interpolation at nearly the same
+sub-pixel positions), so it is in the frame's cost and needs no draw of its own.
 
 The bias indicator is the solver's :class:`~fesdic_core.solve.solvers.BiasStepHook`: the
 change ``Delta = (G' - G) b`` of the field with the regularization one notch weaker (``G'``:
