@@ -372,8 +372,12 @@ def measure_displacement(reference: DisplacementReference, images: Sequence[Imag
     if failure is not None:
         logger.info("displacement failed: %s", failure)
     hooks = given.solver if isinstance(given, CachedFactorization) else given   # (the hooks')
-    uncertainty = displacement_uncertainty(U, view, imgs, hooks, settings.normalisation) \
-        if settings.uncertainty and failure is None else None
+    uncertainty = None
+    if settings.uncertainty and failure is None:
+        try:                      # a field is not failed by its uncertainty's linear algebra
+            uncertainty = displacement_uncertainty(U, view, imgs, hooks, settings.normalisation)
+        except (ArithmeticError, RuntimeError, ValueError, np.linalg.LinAlgError) as err:
+            logger.warning("displacement uncertainty not computed: %s", err)
     return DisplacementMeasurement(U=U, nodes=reference.mesh.nodes, residual=gn.residual,
                                    reference=reference.view(settings.scales[-1]),
                                    history=tuple(log.records), iterations=total_iterations,

@@ -96,3 +96,23 @@ def test_the_finer_ladder_solves_the_same_level_and_gives_its_bias(plate, twist_
     assert np.max(np.abs(a.U - b.U)) < 1e-9
     # the plain ladder's bias is the unregularized step: every FE dof's noise, larger
     assert np.median(a.uncertainty.bias_mm) < 0.5 * np.median(b.uncertainty.bias_mm)
+
+
+def test_an_uncertainty_that_cannot_be_computed_leaves_the_field_trusted(plate, twist_wave_pair,
+                                                                          caplog):
+    """A solver whose step covariance fails (here: it raises) gives the same trusted field,
+    with no uncertainty and a warning that says why."""
+    model, reference = plate
+
+    class Failing(GeometricRegularization):
+        def step_covariance(self, H, scale):
+            raise ValueError("no covariance here")
+
+    solver = Failing(displacement_space(model, 2))
+    with caplog.at_level("WARNING"):
+        m = measure_displacement(reference, twist_wave_pair.deformed, solver)
+    assert m.ok and m.uncertainty is None
+    assert "no covariance here" in caplog.text
+    plain = measure_displacement(reference, twist_wave_pair.deformed,
+                                 GeometricRegularization(displacement_space(model, 2)))
+    np.testing.assert_array_equal(m.U, plain.U)
