@@ -341,7 +341,7 @@ def test_a_local_cluster_of_two_workers_equals_the_serial_run(series, tmp_path, 
     folder, _ = series
     # (the independent frames without their uncertainty: the setting, and a faster test)
     unc = "true" if incremental == "true" else "false"
-    config = _config(folder, displacement=f'method = "fe"\nscales = 3\nincremental = {incremental}'
+    config = _config(folder, displacement=f'method = "fe"\nscales = 2\nincremental = {incremental}'
                      f'\nuncertainty = {unc}')
     runs = {}
     for scheduler in ("serial", "processes"):
