@@ -18,7 +18,9 @@ polygon, the cut-out excluded), on the ``--frames`` from frame 0000. Ours is int
 (linearly, on the specimen's plane) at pyvale's subset centres in the reference state,
 pyvale's points where our valid nodes are; printed per frame and method: the RMS of the
 displacement difference in % of the RMS of pyvale's displacement, the median difference per
-component, and the points compared. (pyvale's coordinates are the deformed positions: the
+component, and the points compared, and the RMS difference of the surface Green-Lagrange strains
+(in %, absolute) computed alike for both codes from their displacements at pyvale's points
+(:func:`fitted_strain`, local planes of radius ``STRAIN_RADIUS_MM``). (pyvale's coordinates are the deformed positions: the
 reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run`` with its defaults, the ROI as a
 mask, when installed in the same environment) likewise, and against pyvale.
 
@@ -42,6 +44,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO), str(REPO / "benchmarks")]
 from georeg_app import cli  # noqa: E402
+
+#: the radius (mm) of the local planes that give every code's strain alike (fitted_strain)
+STRAIN_RADIUS_MM = 2.0
 
 FRAMES = ("0001", "0002", "0003", "0004", "0005", "0110", "0129", "large_motion")
 
@@ -184,10 +189,39 @@ def aldic_frames(data: Path, frames, folder: Path) -> tuple[dict, float]:
     return out, seconds
 
 
-def against_peer(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, int]:
+def fitted_strain(x: np.ndarray, U: np.ndarray, radius_mm: float) -> np.ndarray:
+    """Surface Green-Lagrange strain (p, 3) ``[E_xx, E_yy, E_xy]`` at points ``x`` (p, 2) of
+    the specimen's plane from displacements ``U`` (p, 3) in the specimen frame: at each
+    point the least-squares plane of ``U`` through the points within ``radius_mm`` gives the
+    gradient ``G = dU/dx`` (3 x 2), and ``E = 1/2 (G_2^T + G_2 + G^T G)`` (``G_2`` its
+    in-plane rows). The same for every code, so that strains are computed alike."""
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(x).query_pairs(radius_mm, output_type="ndarray")
+    p = len(x)
+    i = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(p)])
+    j = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(p)])
+    from scipy.sparse import csr_matrix
+    A = csr_matrix((np.ones(len(i)), (i, j)), shape=(p, p))
+    n = np.asarray(A.sum(axis=1)).ravel()
+    mean = lambda v: (A @ v) / n[:, None]
+    xbar, Ubar = mean(x), mean(U)
+    Cxx = mean(np.einsum("pa,pb->pab", x, x).reshape(p, 4)).reshape(p, 2, 2) - \
+        np.einsum("pa,pb->pab", xbar, xbar)
+    CxU = mean(np.einsum("pa,pk->pak", x, U).reshape(p, 6)).reshape(p, 2, 3) - \
+        np.einsum("pa,pk->pak", xbar, Ubar)
+    G = np.linalg.solve(Cxx, CxU).transpose(0, 2, 1)               # (p, 3, 2): dU_k/dx_a
+    E = 0.5 * (G[:, :2, :] + G[:, :2, :].transpose(0, 2, 1) +
+               np.einsum("pka,pkb->pab", G, G))
+    return np.column_stack([E[:, 0, 0], E[:, 1, 1], E[:, 0, 1]])
+
+
+def against_peer(vtu, X: np.ndarray, U: np.ndarray, radius_mm: float = STRAIN_RADIUS_MM
+                 ) -> tuple[float, np.ndarray, int, np.ndarray, np.ndarray]:
     """Our valid nodes' displacement interpolated at a peer's reference points (on the
     specimen's best plane): (RMS difference in % of the peer's RMS, median difference (3,)
-    um, points compared)."""
+    um, points compared, RMS strain difference (3,) in % (absolute) of ``[E_xx, E_yy,
+    E_xy]`` computed alike by :func:`fitted_strain` on the peer's points, the peer's median
+    principal strains (2,) in %)."""
     from scipy.interpolate import LinearNDInterpolator
     valid = np.asarray(vtu.point_data.get("valid", np.ones(len(vtu.points))), bool)
     nodes = np.asarray(vtu.points, float)[valid]
@@ -199,7 +233,14 @@ def against_peer(vtu, X: np.ndarray, U: np.ndarray) -> tuple[float, np.ndarray, 
     diff = at[common] - U[common]
     rms = float(np.sqrt(np.mean(np.sum(diff ** 2, axis=1))) /
                 np.sqrt(np.mean(np.sum(U[common] ** 2, axis=1))))
-    return 100.0 * rms, 1e3 * np.median(diff, axis=0), int(common.sum())
+    x = X[common, :2]                    # the specimen frame: z along the normal
+    theirs = fitted_strain(x, U[common], radius_mm)
+    strain = 100.0 * np.sqrt(np.mean((fitted_strain(x, at[common], radius_mm) - theirs) ** 2,
+                                     axis=0))
+    mean, half = 0.5 * (theirs[:, 0] + theirs[:, 1]), 0.5 * (theirs[:, 0] - theirs[:, 1])
+    radius = np.sqrt(half ** 2 + theirs[:, 2] ** 2)
+    principal = 100.0 * np.array([np.median(mean + radius), np.median(mean - radius)])
+    return 100.0 * rms, 1e3 * np.median(diff, axis=0), int(common.sum()), strain, principal
 
 
 def peer_difference(a: tuple, b: tuple, within_mm: float = 2.0) -> float:
@@ -254,7 +295,8 @@ def peers(args) -> None:
             print(f"\n## {method} (DICe calibration) against pyvale: exit {run['code']}, "
                   f"{run['time_s']:.0f} s in all (reference shape included)")
             print(f"{'frame':13s} {'peer':10s} {'status':7s} {'RMS diff (% of RMS U)':>22s} "
-                  f"{'median diff x, y, z (um)':>26s} {'points':>7s} {'peer RMS U (mm)':>16s}")
+                  f"{'median diff x, y, z (um)':>26s} {'points':>7s} {'peer RMS U (mm)':>16s} "
+                  f"{'strain RMS diff xx, yy, xy (%)':>31s} {'peer e1, e2 (%)':>16s}")
             for name, f in zip(args.frames, run["summary"].get("frames", [])):
                 if not f.get("mesh_file"):
                     print(f"{name:13s} {'':10s} {f['status']:7s} no output: "
@@ -267,10 +309,12 @@ def peers(args) -> None:
                         continue
                     X, U = points[name]               # to the specimen frame of our outputs
                     X, U = (X - origin) @ axes.T, U @ axes.T
-                    rms, med, n = against_peer(vtu, X, U)
+                    rms, med, n, strain, e12 = against_peer(vtu, X, U)
                     print(f"{name:13s} {code:10s} {f['status']:7s} {rms:22.3f} {med[0]:8.2f}"
                           f"{med[1]:9.2f}{med[2]:9.2f} {n:7d} "
-                          f"{np.sqrt(np.mean(np.sum(U ** 2, axis=1))):16.4f}")
+                          f"{np.sqrt(np.mean(np.sum(U ** 2, axis=1))):16.4f} "
+                          f"{strain[0]:11.3f}{strain[1]:10.3f}{strain[2]:10.3f} "
+                          f"{e12[0]:8.2f}{e12[1]:8.2f}")
                 if f["status"] != "ok":
                     print(f"{'':13s} {f.get('failure', '')[:120]}")
 
