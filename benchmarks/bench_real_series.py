@@ -20,8 +20,8 @@ pyvale's points where our valid nodes are; printed per frame and method: the RMS
 displacement difference in % of the RMS of pyvale's displacement, the median difference per
 component, and the points compared, and the RMS difference of the surface Green-Lagrange strains
 (in %, absolute) computed alike for both codes from their displacements at pyvale's points
-(:func:`fitted_strain`, local planes of radius ``STRAIN_RADIUS_MM``). (pyvale's coordinates are the deformed positions: the
-reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run`` with its defaults, the ROI as a
+(:func:`fitted_strain`, local planes of radius ``STRAIN_RADIUS_MM``). (pyvale's coordinates
+are the deformed positions: the reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run`` with its defaults, the ROI as a
 mask, when installed in the same environment) likewise, and against pyvale.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_real_series.py [--data ../shared/data]
@@ -195,12 +195,12 @@ def fitted_strain(x: np.ndarray, U: np.ndarray, radius_mm: float) -> np.ndarray:
     point the least-squares plane of ``U`` through the points within ``radius_mm`` gives the
     gradient ``G = dU/dx`` (3 x 2), and ``E = 1/2 (G_2^T + G_2 + G^T G)`` (``G_2`` its
     in-plane rows). The same for every code, so that strains are computed alike."""
+    from scipy.sparse import csr_matrix
     from scipy.spatial import cKDTree
     pairs = cKDTree(x).query_pairs(radius_mm, output_type="ndarray")
     p = len(x)
     i = np.concatenate([pairs[:, 0], pairs[:, 1], np.arange(p)])
     j = np.concatenate([pairs[:, 1], pairs[:, 0], np.arange(p)])
-    from scipy.sparse import csr_matrix
     A = csr_matrix((np.ones(len(i)), (i, j)), shape=(p, p))
     n = np.asarray(A.sum(axis=1)).ravel()
     mean = lambda v: (A @ v) / n[:, None]
