@@ -21,8 +21,9 @@ displacement difference in % of the RMS of pyvale's displacement, the median dif
 component, and the points compared, and the RMS difference of the surface Green-Lagrange strains
 (in %, absolute) computed alike for both codes from their displacements at pyvale's points
 (:func:`fitted_strain`, local planes of radius ``STRAIN_RADIUS_MM``). (pyvale's coordinates
-are the deformed positions: the reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run`` with its defaults, the ROI as a
-mask, when installed in the same environment) likewise, and against pyvale.
+are the deformed positions: the reference ones are ``X - U``.) al-dic-3d (``al-dic-3d run``
+with its defaults, the ROI as a mask, when installed in the same environment) likewise, and
+against pyvale.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_real_series.py [--data ../shared/data]
 [--methods fe tikhonov georeg] [--frames 0001 0005 0129 large_motion] [--peers]``
