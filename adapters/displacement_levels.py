@@ -6,8 +6,10 @@ level a series needs depends on the loading: a twist holds in the coarse nominal
 waviness needs finer levels. The choice follows the shape's (:mod:`adapters.level_search`,
 :mod:`georeg_plugin.levels.risk`), on one frame:
 
-1. The frame is measured with ``start_levels`` fixed levels; the Gauss-Newton system
-   ``(H, b)`` of its last step at the finest image scale is kept (the solve hook sees it).
+1. The frame is measured with ``start_levels`` fixed levels (one more, up to the ladder's
+   finest, while the measurement fails: a space too coarse for the field, e.g. a large strain,
+   leaves a residual the noise does not explain); the Gauss-Newton system ``(H, b)`` of its
+   last step at the finest image scale is kept (the solve hook sees it).
 2. From that system the optimum of every level of the ladder (the nominal spline refined
    dyadically until the mesh no longer reproduces it, Eq. 16) is predicted (Eq. 21 at the
    level): ``d_s = G_s (b + H u) - u``.
@@ -38,7 +40,7 @@ from georeg_plugin.levels.risk import (AGREEMENT_TOLERANCE, agreement, balanced_
                                        level_risks, node_metric)
 from georeg_plugin.levels.solver import GeometricRegularization
 
-from adapters.fesdic_core import NominalModel, displacement_space
+from adapters.fesdic_core import NominalModel, displacement_space, legacy_mesh_holds
 from adapters.level_search import effective_variance, seen_level_dofs
 
 logger = logging.getLogger(__name__)
@@ -55,7 +57,7 @@ class DisplacementLevels:
 
     levels : the chosen number of levels (the ``levels`` of a fixed run: its finest level is
         the nominal spline refined ``levels - 1`` times).
-    start_levels : the levels of the measured frame.
+    start_levels : the levels the frame was measured with (the system the choice is made on).
     dofs : (n_levels,) spline dofs of each level of the ladder, coarse to fine.
     agreement : (n_levels,) each level's largest change to a finer level, in standard
         deviations of that change, coarse to fine.
@@ -90,12 +92,18 @@ class _LastSystem:
 
 
 def max_displacement_levels(model: NominalModel, cap: int = MAX_LEVELS) -> int:
-    """The most dyadic levels whose finest the FE mesh reproduces (Eq. 16), at most ``cap``."""
+    """The most dyadic levels whose finest the FE mesh reproduces (Eq. 16), at most ``cap``;
+    on a legacy mesh (no node parameters, e.g. a region of interest's) the finest level has at
+    most a quarter as many dofs per component as the mesh has nodes, as the shape's ladder
+    (:func:`~adapters.fesdic_core.legacy_mesh_holds`)."""
     levels = 1
     for n in range(2, int(cap) + 1):
         try:
-            displacement_space(model, n)
+            space = displacement_space(model, n)
         except ValueError:
+            break
+        dofs = space.operators[0].shape[0] // 3                        # per component
+        if model.uv is None and not legacy_mesh_holds(dofs, model.mesh.n_nodes):
             break
         levels = n
     return levels
@@ -112,33 +120,40 @@ def choose_displacement_levels(model: NominalModel, reference: DisplacementRefer
     model : the reference's nominal spline and FE mesh.
     reference : the displacement reference (surface, cameras, reference pair, settings).
     images : the frame's two deformed full-resolution images.
-    start_levels : the fixed levels the frame is first measured with.
+    start_levels : the fixed levels the frame is first measured with (then finer ones while
+        the measurement fails).
     tolerance : the agreement tolerance (standard deviations).
     frame : the frame's name, for the record.
     U0 : (n, 3) the frame's starting field (default zero).
 
     Returns
     -------
-    DisplacementLevels. If the start measurement fails, the start levels are kept (and the
-    record says why in the log).
+    DisplacementLevels. If the measurement fails at every level up to the finest, the start
+    levels are kept (the frame, not the space, is wrong; the log says why).
     """
     top = max_displacement_levels(model)
-    start_levels = min(int(start_levels), top)
-    recorder = _LastSystem(GeometricRegularization(displacement_space(model, start_levels)))
     quick = dataclasses.replace(reference, settings=dataclasses.replace(reference.settings,
                                                                          uncertainty=False))
-    m = measure_displacement(quick, images, recorder, U0)             # (its system, not its std)
     finest = reference.settings.scales[-1]
+    first = min(int(start_levels), top)
+    for start_levels in range(first, top + 1):
+        recorder = _LastSystem(GeometricRegularization(displacement_space(model, start_levels)))
+        m = measure_displacement(quick, images, recorder, U0)         # (its system, not its std)
+        if m.ok or start_levels == top:
+            break
+        # the space may not hold the frame's field: the next finer one is measured
+        logger.info("displacement levels: %d levels do not measure the frame (%s); trying %d",
+                    start_levels, m.failure, start_levels + 1)
     if not m.ok or finest not in recorder.systems or top == 1:
-        logger.info("displacement levels: kept %d (%s)", start_levels,
+        # no level measures it: the frame, not the space, is wrong; the series' start is kept
+        logger.info("displacement levels: kept %d (%s)", first,
                     m.failure or "no finer level to choose from")
-        return DisplacementLevels(start_levels, start_levels, (), (), (), (), float("nan"), frame)
+        return DisplacementLevels(first, first, (), (), (), (), float("nan"), frame)
     H, b, u = recorder.systems[finest]
     H = sps.csr_matrix(H)
     ladder = displacement_space(model, top)                  # level j: `levels` = top - j
     solvers = [GeometricRegularization(ladder, {finest: j}) for j in range(top)]
-    rhs = b + H @ u
-    moves = {j: s.solve(H, rhs, u, finest) - u for j, s in enumerate(solvers)}
+    moves = {j: s.solve(H, b, u, finest) for j, s in enumerate(solvers)}   # G_j (b + H u) - u
     # u lies in the finest level (the levels are nested, Eq. 13): moves[0] = G_0 b
     variance = effective_variance(H, b, 0.0, moves[0], seen_level_dofs(ladder, 0, H))
     metric = node_metric(np.repeat(nodal_areas(reference.mesh), 3))

@@ -34,7 +34,7 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["NominalModel", "nominal_model", "part_model", "keep_elements", "georeg_solver", "displacement_space", "is_curved",
            "measured_spline", "measured_spline_std",
-           "multilevel_for_mesh", "check_nested_mesh"]
+           "multilevel_for_mesh", "check_nested_mesh", "legacy_mesh_holds"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -258,6 +258,17 @@ def component_space_for_mesh(model: NominalModel, n_levels: int) -> MultilevelSp
         return multilevel_for_mesh(model, n_levels, curved=False)
     _check_part_levels(model, n_levels)
     return part_component_space(model.faces, n_levels, model.uv, model.node_face)
+
+
+#: FE nodes per spline dof that a legacy mesh (no node parameters) needs to hold a level: a
+#: Q9 mesh has about four nodes per spline dof of the spline whose knot spans are its elements
+NODES_PER_DOF = 4
+
+
+def legacy_mesh_holds(n_dofs: int, n_nodes: int) -> bool:
+    """True if a legacy mesh of ``n_nodes`` nodes holds a level of ``n_dofs`` spline dofs (per
+    component): at most a quarter as many dofs as nodes (:data:`NODES_PER_DOF`)."""
+    return n_dofs * NODES_PER_DOF <= n_nodes
 
 
 def displacement_space(model: NominalModel, n_levels: int) -> MultilevelSpace:

@@ -61,7 +61,7 @@ from georeg_plugin.levels.support import ZERO_PIVOT, mesh_seen
 from georeg_plugin.spline.refine import insert_knots, linear_patch, refine_uniform
 
 from adapters.fesdic_core import (NominalModel, elements_per_span, is_curved,
-                                  scalar_holds_rigid_motions)
+                                  legacy_mesh_holds, scalar_holds_rigid_motions)
 
 logger = logging.getLogger(__name__)
 
@@ -153,7 +153,7 @@ def ladder(model: NominalModel, curved: bool | None = None,
     if model.uv is None:
         while len(patches) < 12:
             finer, C_r = refine_uniform(patches[-1], 1)
-            if finer.n_dofs > model.mesh.n_nodes / 4:
+            if not legacy_mesh_holds(finer.n_dofs, model.mesh.n_nodes):
                 break
             patches.append(finer)
             refinements.append(C_r)
@@ -260,11 +260,11 @@ def fixed_level(space: MultilevelSpace, model: NominalModel, level: int,
 def _move_to(space: MultilevelSpace, level: int, H, b: np.ndarray, q: np.ndarray,
              scale: int, hold: bool = True) -> np.ndarray:
     """The step from ``q`` to the optimum of ``level`` by the Gauss-Newton model (Eq. 8):
-    ``G_s (b + H q) - q`` with ``G_s = C_s^T (C_s H C_s^T)^-1 C_s`` (Eqs. 18-21). For a level
-    that holds ``q`` (finer, nested: Eq. 13) it is the level's Gauss-Newton step ``G_s b``.
+    ``G_s (b + H q) - q``, ``G_s = C_s^T (C_s H C_s^T)^-1 C_s`` (Eqs. 18-21; a solver's step at
+    its finest level), ``G_s b`` for a level that holds ``q`` (finer, nested: Eq. 13).
     ``hold``: dofs that no point sees keep their value (outside the outline, hidden regions)."""
     solver = GeometricRegularization(space, {scale: level}, hold_unseen=hold)
-    return solver.solve(H, b + H @ q, q, scale) - q
+    return solver.solve(H, b, q, scale)
 
 
 def measure_auto_levels(model: NominalModel, images: Sequence, cameras: Sequence,

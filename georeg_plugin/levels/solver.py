@@ -8,6 +8,14 @@ spline space of level ``s``:
     H_IG = C_s H_FE C_s^T,   b_IG = C_s b_FE          (Eqs. 18-20)
     d_IG = H_IG^-1 b_IG,     d = C_s^T d_IG           (Eq. 21)
 
+At the finest level of its schedule the step lands in the level's span from any ``q``:
+``q + d = C_s^T H_IG^-1 C_s (b_FE + H_FE q)``, the optimum of the Gauss-Newton model (Eq. 8)
+over the level's dofs. For ``q`` in the span (the nominal, a coarser level's result: the
+levels are nested, Eq. 13) this is the step of Eq. 21; a start outside it (a displacement
+interpolated from matched features, an FE field) is drawn into it at once, instead of
+keeping for ever the part that no step in the span can change. Coarser levels (coarser image
+scales) take the step of Eq. 21 alone: they leave a start's finer detail to the finer scales.
+
 ``GeometricRegularization`` duck-types the core's ``StepSolver`` protocol
 (``solve(H, b, q, scale) -> d``); it holds only the (immutable) multilevel space and
 the schedule image scale -> spline level, so it is stateless: the spline control
@@ -168,6 +176,11 @@ class GeometricRegularization:
         """Number of spline levels."""
         return len(self.space.operators)
 
+    @property
+    def landing_level(self) -> int:
+        """The finest level of the schedule, whose step lands in its span (module docstring)."""
+        return 0 if self.schedule is None else min(self.schedule.values())
+
     def level(self, scale: int) -> int:
         """Spline level used at image scale ``scale`` (0 = finest images)."""
         if scale < 0:
@@ -208,7 +221,10 @@ class GeometricRegularization:
     def solve(self, H, b: np.ndarray, q: np.ndarray, scale: int) -> np.ndarray:
         """Regularized step ``d = C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21), (n_fe,).
 
-        ``q`` (the current nodal shape) is not needed: the step is linear in ``b``.
+        ``q`` (n_fe,), the current nodal unknown: at :attr:`landing_level` the step lands in
+        the level's span, ``d = G_s (b + H q) - q`` with ``G_s = C_s^T (C_s H C_s^T)^-1 C_s``,
+        on the dofs some integration point sees (the others keep their value); the same step
+        for ``q`` in the span.
         """
         return self.factorize(H, scale)(b, q)
 
@@ -254,7 +270,8 @@ class GeometricRegularization:
         """The step's map ``(b, q) -> C_s^T (C_s H C_s^T)^-1 C_s b`` (Eqs. 18-21) with
         ``C_s H C_s^T`` factorized once: for a Gauss-Newton whose ``H`` does not change.
         With ``hold_unseen`` the level is first restricted to its seen dofs (``E``):
-        ``C_s^T E^T (E C_s H C_s^T E^T)^-1 E C_s b``."""
+        ``C_s^T E^T (E C_s H C_s^T E^T)^-1 E C_s b``. At :attr:`landing_level` the map lands
+        in the span (:meth:`solve`)."""
         s = self.level(scale)
         C, CT = self.operator(s), self._transposed[s]
         H_s, _ = self.project(H, np.zeros(C.shape[1]), s)
@@ -273,16 +290,28 @@ class GeometricRegularization:
         logger.debug("scale %d -> spline level %d: %d of %d dofs", scale, s, E.shape[0],
                      C.shape[0])
 
-        def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
-            b = np.asarray(b, dtype=float)
-            if b.shape != (C.shape[1],):
-                raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
-                                 f"spline level {s}")
+        def spline_step(b: np.ndarray) -> np.ndarray:
             b_s = C @ b                                                # Eq. 19
             d_s = np.zeros(C.shape[0])
             if solve is not None:
                 d_s = E.T @ solve(E @ b_s)
             return CT @ d_s                                            # Eq. 21
+
+        land = s == self.landing_level
+        H_csr = sps.csr_matrix(H) if land else None
+        seen = _seen_dofs(H_csr) if land else None
+
+        def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
+            b = np.asarray(b, dtype=float)
+            if b.shape != (C.shape[1],):
+                raise ValueError(f"b {b.shape} does not match the {C.shape[1]} FE nodes of "
+                                 f"spline level {s}")
+            d = spline_step(b)
+            q = None if q is None else np.asarray(q, dtype=float)
+            if land and q is not None and q.shape == b.shape and np.any(q):
+                outside = q - spline_step(H_csr @ q)    # q's part off the span (0 in the span)
+                d -= np.where(seen, outside, 0.0)       # q + d = G_s (b + H q) where seen
+            return d
         return step
 
     def projected_inverse(self, H, level: int) -> np.ndarray:

@@ -3,11 +3,13 @@ fixed level, on renders with a known motion (tests/scenes.py ``twist_wave_pair``
 plate, then the same paint twisted and wavy, 320 x 240 px): the twist and its long
 waviness, which the nominal spline holds, and a waviness of 20 mm wavelength, which needs
 the finest level the mesh reproduces."""
+import dataclasses
+
 import numpy as np
 import pytest
 
 from adapters.displacement_levels import choose_displacement_levels, max_displacement_levels
-from adapters.fesdic_core import nominal_model
+from adapters.fesdic_core import displacement_space, nominal_model
 from fesdic_core.displacement.driver import (DisplacementSettings, displacement_reference,
                                              measure_displacement)
 from fesdic_core.synthetic.motion import HeightMotion
@@ -56,3 +58,33 @@ def test_the_chosen_levels_are_within_10_percent_of_the_best_fixed_levels(twist_
     # the chosen level agrees with the finer ones; the next coarser does not
     k = record.levels - 1                                  # its index, coarse to fine
     assert record.agreement[k] <= 2.0 and (k == 0 or record.agreement[k - 1] > 2.0)
+
+
+def test_a_start_space_too_coarse_for_the_field_steps_up(twist_wave_pair):
+    """A 1 mm waviness of 20 mm wavelength: 2 fixed levels fail (measured: residual 6.7 %,
+    4.3 times the noise floor; 3 levels 2.2 %, ok). The choice measures the next finer
+    levels instead of keeping the failed start, and chooses from that system (4 levels)."""
+    pair = twist_wave_pair
+    images = pair.moved(HeightMotion(lambda x, y: _wave(x, y, amplitude_mm=1.0)))
+    model = nominal_model(rectangle(44.0, 30.0), (24, 16), "Q9")
+    reference = displacement_reference(model.mesh, pair.reference, pair.cameras,
+                                       DisplacementSettings(scales=(2, 1, 0)))
+    coarse = measure_displacement(reference, images,
+                                  displacement_solver("georeg", model.mesh, model, 10.0, 2))
+    assert not coarse.ok                                   # the case is what it claims
+    record = choose_displacement_levels(model, reference, images, start_levels=2)
+    assert record.start_levels == 3 and record.levels == 4, record
+    assert len(record.agreement) == max_displacement_levels(model)
+
+
+def test_a_legacy_mesh_caps_the_ladder_at_a_quarter_of_its_nodes():
+    """Without node parameters (a mesh read from a file, a region of interest's) no knot
+    check bounds the ladder: its finest level has at most n_nodes / 4 dofs per component,
+    as the shape's ladder (24 x 16 Q9: 1617 nodes, levels of 9, 16, 36, 100, 324, 1156 dofs:
+    5 levels, where the mesh with its parameters reproduces 4)."""
+    model = nominal_model(rectangle(44.0, 30.0), (24, 16), "Q9")
+    legacy = dataclasses.replace(model, uv=None)
+    top = max_displacement_levels(legacy)
+    dofs = [displacement_space(legacy, n).operators[0].shape[0] // 3 for n in (top, top + 1)]
+    assert 4 * dofs[0] <= legacy.mesh.n_nodes < 4 * dofs[1], (top, dofs)
+    assert (top, max_displacement_levels(model)) == (5, 4)
