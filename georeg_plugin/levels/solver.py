@@ -298,8 +298,8 @@ class GeometricRegularization:
             return CT @ d_s                                            # Eq. 21
 
         land = s == self.landing_level
-        H_csr = sps.csr_matrix(H) if land else None
-        seen = _seen_dofs(H_csr) if land else None
+        H_csr = sps.csr_matrix(H)
+        seen = _seen_dofs(H_csr) if land else np.zeros(C.shape[1], dtype=bool)
 
         def step(b: np.ndarray, q: np.ndarray) -> np.ndarray:
             b = np.asarray(b, dtype=float)
