@@ -61,9 +61,9 @@ def judge(residual_percent: float, noise_percent: float, q: np.ndarray, nodes: n
         return (f"the residual {residual_percent:.3g}% is {ratio:.3g} times the {noise_percent:.3g}% "
                 f"that the image noise explains (at most {settings.consistency_factor:g}): the "
                 "images do not match the surface and cameras (wrong or swapped cameras, wrong "
-                "poses or specimen, a wrong minimum, or a regularization too strong for the shape)")
+                "poses or specimen, a wrong minimum, or a regularization too strong for the field)")
     if not finest.converged:
-        what = "shape Gauss-Newton" if not finest.shape_converged else "fixed point"
+        what = "Gauss-Newton" if not finest.shape_converged else "fixed point"
         return (f"the {what} did not stagnate at the finest scale (scale {finest.scale}) "
                 "within its iteration limit")
     return None

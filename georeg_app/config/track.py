@@ -29,7 +29,9 @@ A complete example (optional keys show their default in parentheses)::
                                   # coarsest scale, of that and the last good frame's field);
                                   # "previous": the last good frame's field (zero without
                                   # incremental); "zero"                  (default "features")
-    tikhonov_length_mm = 10.0     # method = "tikhonov": length (mm) on each component (10)
+    tikhonov_length_mm = "auto"   # method = "tikhonov": length (mm) on each component, or
+                                  # "auto": the longest of 10 mm / sqrt(2)**k at which the
+                                  # last frame measures, kept for the series (default "auto")
     levels = "auto"               # method = "georeg": spline levels per component, or
                                   # "auto": chosen on the last frame (the coarsest level
                                   # that agrees with every finer one within 2 std of their
@@ -113,7 +115,7 @@ class DisplacementConfig:
     method: str = "fe"
     scales: int = 3
     incremental: bool = True
-    tikhonov_length_mm: float = 10.0
+    tikhonov_length_mm: float | str = AUTO
     levels: int | str = AUTO
     jacobian: str = "reference"
     start: str = "features"
@@ -196,6 +198,11 @@ def series_table(data: Any, source: Path, base: Path) -> SeriesConfig:
     return SeriesConfig(cam0, cam1)
 
 
+def _number_or_auto(value: Any) -> float | str:
+    """A finite number (not a boolean) or the string "auto"."""
+    return value if value == AUTO else number(value)
+
+
 def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     """The ``[displacement]`` table, checked (defaults for the keys it lacks)."""
     t = Table(data, "[displacement]", source)
@@ -204,8 +211,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
         method=t.take("method", string, "a string", default=d.method),
         scales=t.take("scales", integer, "an integer", default=d.scales),
         incremental=t.take("incremental", boolean, "true or false", default=d.incremental),
-        tikhonov_length_mm=t.take("tikhonov_length_mm", number, "a number (mm)",
-                                  default=d.tikhonov_length_mm),
+        tikhonov_length_mm=t.take("tikhonov_length_mm", _number_or_auto,
+                                  'a number (mm) or "auto"', default=d.tikhonov_length_mm),
         levels=t.take("levels", integer_or_auto, 'an integer or "auto"', default=d.levels),
         jacobian=t.take("jacobian", string, "a string", default=d.jacobian),
         start=t.take("start", string, "a string", default=d.start),
@@ -217,7 +224,8 @@ def displacement_table(data: Any, source: Path) -> DisplacementConfig:
     check(t, "method", c.method, c.method in DISPLACEMENT_METHODS,
           "one of " + ", ".join(map(json.dumps, DISPLACEMENT_METHODS)))
     check(t, "scales", c.scales, c.scales >= 1, ">= 1")
-    check(t, "tikhonov_length_mm", c.tikhonov_length_mm, c.tikhonov_length_mm > 0, "> 0 (mm)")
+    check(t, "tikhonov_length_mm", c.tikhonov_length_mm,
+          c.tikhonov_length_mm == AUTO or c.tikhonov_length_mm > 0, '> 0 (mm) or "auto"')
     check(t, "levels", c.levels, c.levels == AUTO or c.levels >= 1, '>= 1 or "auto"')
     check(t, "jacobian", c.jacobian, c.jacobian in JACOBIANS,
           "one of " + ", ".join(map(json.dumps, JACOBIANS)))

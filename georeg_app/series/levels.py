@@ -52,7 +52,7 @@ def with_chosen_levels(reference: SeriesReference, config: TrackConfig) -> Serie
                                     str(paths[0]))
     d = config.displacement
     solver = displacement_solver(d.method, reference.displacement.mesh, model,
-                                 d.tikhonov_length_mm, record.levels)
+                                 levels=record.levels)
     if d.jacobian == "reference":
         solver = CachedFactorization(solver)
     logger.info("displacement: %d spline levels per component, chosen on %s", record.levels,

@@ -102,11 +102,15 @@ def track_summary(run) -> dict:
         })
     d = run.config.displacement
     chosen = getattr(run, "levels", None)
+    length = getattr(run, "tikhonov_length", None)
     return _json_ready({
         "reference": run.reference_label,
         "displacement": {"method": d.method, "scales": list(d.scale_sequence),
                          "incremental": d.incremental,
-                         "tikhonov_length_mm": d.tikhonov_length_mm if d.method == "tikhonov" else None,
+                         "tikhonov_length_mm": (d.tikhonov_length_mm if length is None
+                                                else length.length_mm)
+                         if d.method == "tikhonov" else None,
+                         "tikhonov_length_chosen": None if length is None else length.as_dict(),
                          "levels": (d.levels if chosen is None else chosen.levels)
                          if d.method == "georeg" else None,
                          "levels_chosen": None if chosen is None else chosen.as_dict(),

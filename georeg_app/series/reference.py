@@ -67,6 +67,9 @@ class SeriesReference:
     levels_model: NominalModel | None = None
     #: the record of that choice (:class:`~adapters.displacement_levels.DisplacementLevels`)
     levels: object | None = None
+    #: with ``tikhonov_length_mm = "auto"``, the record of the length's choice
+    #: (:class:`~georeg_app.series.tikhonov_length.TikhonovLength`)
+    tikhonov_length: object | None = None
 
 
 def _reference_images(config: TrackConfig, prefilter_px: float | None = None) -> tuple[Image, Image]:
@@ -148,6 +151,9 @@ MAX_SCALES = 16
 
 #: the displacement's levels of a series' first measurement when they are chosen from the data
 START_LEVELS = 2
+#: the Tikhonov length of ``tikhonov_length_mm = "auto"`` before its choice (mm; the first
+#: length of :func:`georeg_app.series.tikhonov_length.length_ladder`)
+START_LENGTH_MM = 10.0
 
 
 def displacement_solver(method: str, mesh: SurfaceMesh, model: NominalModel | None = None,
@@ -202,7 +208,8 @@ def series_reference(config: TrackConfig, progress=False) -> SeriesReference:
         images = _reference_images(config, d.prefilter_px)
     reference = displacement_reference(mesh, images, cameras, settings)
     auto = d.method == "georeg" and d.levels == AUTO
-    solver = displacement_solver(d.method, mesh, model, d.tikhonov_length_mm,
+    length = START_LENGTH_MM if d.tikhonov_length_mm == AUTO else float(d.tikhonov_length_mm)
+    solver = displacement_solver(d.method, mesh, model, length,
                                  START_LEVELS if auto else d.levels)
     if d.jacobian == "reference":      # H of each scale factorized once for the whole series
         solver = CachedFactorization(DirectSolver() if solver is None else solver)

@@ -24,6 +24,7 @@ from georeg_app.series.dask import run_series_dask
 from georeg_app.series.frames import FrameResult, chained_frame, log_frame, measure_frame
 from georeg_app.series.levels import with_chosen_levels
 from georeg_app.series.reference import SeriesReference, check_frames, series_reference
+from georeg_app.series.tikhonov_length import with_chosen_length
 
 logger = logging.getLogger(__name__)
 
@@ -40,6 +41,7 @@ class TrackRun:
     time_s: float
     element_face: np.ndarray | None = None       # a CAD part's face of each element
     levels: object | None = None     # levels = "auto": the choice's DisplacementLevels
+    tikhonov_length: object | None = None   # tikhonov_length_mm = "auto": its TikhonovLength
 
 
 def run_series(reference: SeriesReference, frames: Sequence[tuple[Path, Path]],
@@ -72,7 +74,7 @@ def run_track(config: TrackConfig, scheduler: str = "serial",
     t0 = time.perf_counter()
     reference = series_reference(config, progress)
     check_frames(config, reference.displacement.images[0].shape)
-    reference = with_chosen_levels(reference, config)
+    reference = with_chosen_length(with_chosen_levels(reference, config), config)
     frames = list(zip(config.series.cam0, config.series.cam1))
     logger.info("reference: %s; %d nodes; %d frames, displacement method %s, scales %s, %s",
                 reference.label, reference.displacement.mesh.n_nodes, len(frames),
@@ -94,4 +96,4 @@ def run_track(config: TrackConfig, scheduler: str = "serial",
     return TrackRun(config=config, mesh=reference.displacement.mesh, frames=tuple(results),
                     reference_label=reference.label, scheduler=scheduler,
                     time_s=time.perf_counter() - t0, element_face=reference.element_face,
-                    levels=reference.levels)
+                    levels=reference.levels, tikhonov_length=reference.tikhonov_length)
