@@ -308,7 +308,10 @@ class GeometricRegularization:
                                  f"spline level {s}")
             d = spline_step(b)
             q = None if q is None else np.asarray(q, dtype=float)
-            if land and q is not None and q.shape == b.shape and np.any(q):
+            if land and q is not None and q.shape != b.shape:
+                raise ValueError(f"q {q.shape} does not match the {C.shape[1]} FE nodes of "
+                                 f"spline level {s}")
+            if land and q is not None and np.any(q):
                 outside = q - spline_step(H_csr @ q)    # q's part off the span (0 in the span)
                 d -= np.where(seen, outside, 0.0)       # q + d = G_s (b + H q) where seen
             return d
